@@ -1,0 +1,5 @@
+"""diathermy: an electrosurgery simulator (electro-thermo-mechanical FEM with a level-set cut)."""
+
+from diathermy.version import __version__
+
+__all__ = ["__version__"]

@@ -1,0 +1,1 @@
+"""Vectorised P1 finite-element kernels over tetrahedral meshes."""

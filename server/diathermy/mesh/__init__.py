@@ -1,0 +1,6 @@
+"""Structured grids of nodes and their conforming 6-tetrahedra-per-cell meshes."""
+
+from diathermy.mesh.grid import Grid
+from diathermy.mesh.tet_mesh import SIDES, TetMesh, barycentric, build_tet_mesh
+
+__all__ = ["SIDES", "Grid", "TetMesh", "barycentric", "build_tet_mesh"]
