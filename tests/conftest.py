@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from diathermy.mesh import Grid, TetMesh, build_tet_mesh
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from diathermy.fem.geometry import element_geometry, gradient, structured_geometry
 from diathermy.fem.scalar import (
     assemble_diffusion,

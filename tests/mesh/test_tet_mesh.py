@@ -6,6 +6,7 @@ from collections import Counter
 
 import numpy as np
 import pytest
+
 from diathermy.errors import MeshError
 from diathermy.fem.geometry import element_geometry
 from diathermy.mesh import SIDES, Grid, build_tet_mesh
