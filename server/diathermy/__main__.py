@@ -1,0 +1,5 @@
+"""``python -m diathermy`` runs the command line."""
+
+from diathermy.cli import main
+
+raise SystemExit(main())

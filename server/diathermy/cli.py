@@ -1,0 +1,160 @@
+"""The ``diathermy`` command line: simulate scenes, list them, print their schema.
+
+Every user error prints one line (``diathermy: error: ...``) and exits with status 2; a
+traceback means a bug.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from diathermy.errors import DiathermyError, SceneError
+from diathermy.scene import (
+    Scene,
+    builtin_scene,
+    builtin_scene_names,
+    load_scene,
+    scene_from_dict,
+    scene_json_schema,
+)
+from diathermy.version import __version__
+
+
+def parse_grid(text: str) -> tuple[int, int, int]:
+    """``NZxNYxNX`` -> (nz, ny, nx)."""
+    parts = text.lower().split("x")
+    try:
+        nz, ny, nx = (int(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"grid must look like 33x33x65 (nodes z, y, x), got {text!r}"
+        ) from None
+    if min(nz, ny, nx) < 3:
+        raise argparse.ArgumentTypeError(f"every node count must be >= 3, got {text!r}")
+    return nz, ny, nx
+
+
+def resolve_scene(ref: str | None) -> Scene:
+    """A built-in scene name, a path to a JSON/YAML scene file, or the default scene."""
+    if ref is None:
+        return builtin_scene("default")
+    if ref in builtin_scene_names():
+        return builtin_scene(ref)
+    path = Path(ref)
+    if path.suffix.lower() in {".json", ".yaml", ".yml"} or path.exists():
+        return load_scene(path)
+    raise SceneError(
+        f"{ref!r} is neither a built-in scene ({', '.join(builtin_scene_names())}) nor a scene file"
+    )
+
+
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    from diathermy.engine.run import run_scene  # heavy imports only when simulating
+
+    data = resolve_scene(args.scene).model_dump()
+    if args.grid is not None:
+        data["grid"] = args.grid
+    if args.steps is not None:
+        data["steps"] = args.steps
+    if args.mechanics is not None:
+        data["mechanics"]["backend"] = args.mechanics
+    if args.model is not None:
+        data["mechanics"]["model"] = args.model
+    scene = scene_from_dict(data)
+    summary = run_scene(
+        scene,
+        out=Path(args.out),
+        vtu_dir=Path(args.vtu) if args.vtu else None,
+        every=args.every,
+        progress=not args.quiet,
+    )
+    print(summary)
+    return 0
+
+
+def _cmd_scenes(args: argparse.Namespace) -> int:
+    for name in builtin_scene_names():
+        s = builtin_scene(name)
+        nz, ny, nx = s.grid
+        print(f"{name:18s} {nz}x{ny}x{nx}  {s.steps:4d} steps  {', '.join(s.closed_effects)}")
+        if args.verbose:
+            print(f"    {s.description}")
+    return 0
+
+
+def _cmd_schema(args: argparse.Namespace) -> int:
+    text = json.dumps(scene_json_schema(), indent=2)
+    if args.out:
+        Path(args.out).write_text(text + "\n", encoding="utf-8")
+    else:
+        print(text)
+    return 0
+
+
+def _cmd_show_scene(args: argparse.Namespace) -> int:
+    print(resolve_scene(args.scene).model_dump_json(indent=2))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="diathermy", description="Electrosurgery simulator.")
+    p.add_argument("--version", action="version", version=f"diathermy {__version__}")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("simulate", help="run a scene and write an HDF5 run file")
+    s.add_argument(
+        "scene",
+        nargs="?",
+        help="built-in scene name or JSON/YAML file (default: the default scene)",
+    )
+    s.add_argument("--grid", type=parse_grid, help="override the grid, nodes NZxNYxNX")
+    s.add_argument("--steps", type=int, help="override the number of steps")
+    s.add_argument("--out", default="runs/run.h5", help="run file to write (default runs/run.h5)")
+    s.add_argument(
+        "--vtu", help="also write ParaView VTU files (and a .pvd series) into this folder"
+    )
+    s.add_argument("--every", type=int, default=1, help="write every k-th step (default 1)")
+    s.add_argument("--mechanics", choices=["fem", "cnn", "pgd"], help="mechanics backend")
+    s.add_argument("--model", help="surrogate model file for --mechanics cnn|pgd")
+    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.set_defaults(func=_cmd_simulate)
+
+    s = sub.add_parser("scenes", help="list the built-in scenes")
+    s.add_argument("-v", "--verbose", action="store_true")
+    s.set_defaults(func=_cmd_scenes)
+
+    s = sub.add_parser(
+        "show-scene", help="print a scene (built-in or file) as JSON with all defaults"
+    )
+    s.add_argument("scene", nargs="?")
+    s.set_defaults(func=_cmd_show_scene)
+
+    s = sub.add_parser("schema", help="print the scene JSON Schema")
+    s.add_argument("--out", help="write to this file instead of stdout")
+    s.set_defaults(func=_cmd_schema)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if getattr(args, "steps", None) is not None and args.steps < 0:
+        parser.error("--steps must be >= 0")
+    if getattr(args, "every", 1) < 1:
+        parser.error("--every must be >= 1")
+    try:
+        return int(args.func(args))
+    except DiathermyError as err:
+        print(f"diathermy: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("diathermy: interrupted; what was written so far is kept", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,1 @@
+"""The engine: a simulation session's state and the step that advances it."""

@@ -1,0 +1,30 @@
+"""Scenes: what to simulate (block, grid, tissue, electrodes, effects, solvers), as versioned models."""
+
+from diathermy.scene.builtin import builtin_scene, builtin_scene_names
+from diathermy.scene.io import load_scene, scene_from_dict, scene_json_schema
+from diathermy.scene.models import (
+    EFFECTS,
+    Electrode,
+    ElectrodePath,
+    LevelSetConfig,
+    MechanicsConfig,
+    Scene,
+    SolverConfig,
+    close_effects,
+)
+
+__all__ = [
+    "EFFECTS",
+    "Electrode",
+    "ElectrodePath",
+    "LevelSetConfig",
+    "MechanicsConfig",
+    "Scene",
+    "SolverConfig",
+    "builtin_scene",
+    "builtin_scene_names",
+    "close_effects",
+    "load_scene",
+    "scene_from_dict",
+    "scene_json_schema",
+]

@@ -1,0 +1,175 @@
+"""The scene model (schema version 1): every input of a simulation, validated, with SI units."""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from diathermy.physics.materials import Tissue
+
+SCHEMA_VERSION = 1
+
+EFFECTS = (
+    "electric",
+    "thermal",
+    "vaporization",
+    "mechanics",
+    "dissection",
+    "desiccation",
+    "thermal_damage",
+)
+"""Effects a scene can call for, in the order a step runs them."""
+
+Effect = Literal[
+    "electric",
+    "thermal",
+    "vaporization",
+    "mechanics",
+    "dissection",
+    "desiccation",
+    "thermal_damage",
+]
+
+REQUIRES: dict[str, tuple[str, ...]] = {
+    "electric": (),
+    "thermal": (),
+    "vaporization": ("thermal",),
+    "mechanics": ("vaporization",),
+    "dissection": ("mechanics",),
+    "desiccation": ("electric", "vaporization"),
+    "thermal_damage": ("thermal",),
+}
+"""What each effect needs; ``close_effects`` adds these transitively."""
+
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+
+def close_effects(effects: list[str] | tuple[str, ...]) -> tuple[str, ...]:
+    """The effects plus everything they need, in run order."""
+    wanted = set(effects)
+    stack = list(effects)
+    while stack:
+        for dep in REQUIRES[stack.pop()]:
+            if dep not in wanted:
+                wanted.add(dep)
+                stack.append(dep)
+    return tuple(e for e in EFFECTS if e in wanted)
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class ElectrodePath(_Model):
+    """A path on the top surface followed at constant speed from ``start_s``; it stops at the end."""
+
+    waypoints_m: list[tuple[Finite, Finite]] = Field(min_length=2, description="(x, y) in m")
+    speed_m_per_s: Positive = 12.35e-3
+    kind: Literal["polyline", "spline"] = "polyline"
+    start_s: NonNegative = 0.0
+
+
+class Electrode(_Model):
+    """The active ball electrode: where it touches, how it is driven, when it is on."""
+
+    name: str = "active"
+    position_m: tuple[Finite, Finite] = Field(
+        (0.1, 0.05), description="(x, y) of the contact centre on the top surface, m"
+    )
+    radius_m: Positive = 1.17e-3
+    drive: Literal["current_density", "power"] = "power"
+    current_density_a_per_m2: NonNegative = 5.72e4
+    power_w: NonNegative = 50.0
+    active: bool = True
+    schedule_s: list[tuple[NonNegative, NonNegative]] | None = Field(
+        None, description="on-intervals [(t_on, t_off), ...] in s; None means always on"
+    )
+    path: ElectrodePath | None = None
+
+    @field_validator("schedule_s")
+    @classmethod
+    def _ordered(cls, v: list[tuple[float, float]] | None) -> list[tuple[float, float]] | None:
+        for t_on, t_off in v or []:
+            if t_off <= t_on:
+                raise ValueError(f"on-interval ({t_on}, {t_off}) must end after it starts")
+        return v
+
+
+class SolverConfig(_Model):
+    """Accuracy knobs of the electro-thermal solves."""
+
+    electric_rtol: Annotated[float, Field(gt=0, lt=1)] = 1e-9
+    thermal_rtol: Annotated[float, Field(gt=0, lt=1)] = 1e-9
+    coupling: Literal["staggered", "monolithic"] = "staggered"
+
+
+class MechanicsConfig(_Model):
+    """Which backend solves the mechanics and its accuracy knobs."""
+
+    backend: Literal["fem", "cnn", "pgd"] = "fem"
+    rtol: Annotated[float, Field(gt=0, lt=1)] = 1e-6
+    model: str | None = Field(None, description="surrogate model path or registry name")
+    guard_tolerance: Annotated[float, Field(gt=0)] | None = Field(
+        None, description="relative equilibrium residual above which the CNN is corrected by CG"
+    )
+
+
+class LevelSetConfig(_Model):
+    """The dissection law and its numerics (PHYSICS.md section 4)."""
+
+    v0_m_per_s: Positive = 5e-3
+    reinit_every: Annotated[int, Field(ge=1)] = 10
+    cfl: Annotated[float, Field(gt=0, le=1)] = 0.5
+
+
+class Scene(_Model):
+    """Everything a simulation needs. Lengths in m, times in s."""
+
+    schema_version: Literal[1] = SCHEMA_VERSION
+    name: str = "custom"
+    description: str = ""
+    block_m: tuple[Positive, Positive, Positive] = (0.2, 0.1, 0.1)
+    grid: tuple[int, int, int] = Field((33, 33, 65), description="nodes (nz, ny, nx)")
+    material: Tissue = Tissue()
+    electrodes: list[Electrode] = Field(default_factory=lambda: [Electrode()])
+    dt_s: Annotated[float, Field(gt=0, le=10.0)] = 0.03
+    steps: Annotated[int, Field(ge=0)] = 100
+    effects: list[Effect] = Field(
+        default_factory=lambda: ["electric", "thermal", "vaporization", "mechanics", "dissection"]
+    )
+    solver: SolverConfig = SolverConfig()
+    mechanics: MechanicsConfig = MechanicsConfig()
+    level_set: LevelSetConfig = LevelSetConfig()
+
+    @field_validator("grid")
+    @classmethod
+    def _grid(cls, v: tuple[int, int, int]) -> tuple[int, int, int]:
+        if any(n < 3 for n in v):
+            raise ValueError(f"every node count must be >= 3, got {v}")
+        return v
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Scene:
+        lx, ly, _ = self.block_m
+        for i, el in enumerate(self.electrodes):
+            for x, y in [el.position_m]:  # a path may leave the block: contact then ends
+                if not (
+                    -el.radius_m <= x <= lx + el.radius_m and -el.radius_m <= y <= ly + el.radius_m
+                ):
+                    raise ValueError(
+                        f"electrodes.{i}: point ({x}, {y}) m lies off the top surface "
+                        f"[0, {lx}] x [0, {ly}] m"
+                    )
+        if "electric" in self.effects and not self.electrodes:
+            raise ValueError("effects: 'electric' needs at least one electrode")
+        if len({e.name for e in self.electrodes}) != len(self.electrodes):
+            raise ValueError("electrodes: names must be unique")
+        return self
+
+    @property
+    def closed_effects(self) -> tuple[str, ...]:
+        """The effects called for plus what they need, in run order."""
+        return close_effects(self.effects)
