@@ -133,3 +133,34 @@ def test_corrupt_foreign_and_future_files_are_refused(tmp_path: Path) -> None:
         with pytest.raises(CheckpointError, match=message) as info:
             load_checkpoint(bad)
         assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("kernel", [1, 3])
+@pytest.mark.parametrize("channels_last", [False, True])
+def test_direct_onednn_conv_matches_the_reference(kernel: int, channels_last: bool) -> None:
+    """The inference fast path against the plain F.conv3d twin (PyTorch's generic route)."""
+    from torch.nn import functional as F
+
+    from diathermy.surrogates.layers import _use_onednn_directly, conv3d_same
+
+    torch.manual_seed(0)
+    x = torch.randn(1, 5, 7, 6, 9)
+    w, b = torch.randn(4, 5, kernel, kernel, kernel), torch.randn(4)
+    if channels_last:
+        x = x.contiguous(memory_format=torch.channels_last_3d)
+    with torch.inference_mode():
+        assert _use_onednn_directly(x, w)
+        fast = conv3d_same(x, w, b)
+    ref = F.conv3d(x, w, b, padding=kernel // 2)
+    assert fast.shape == ref.shape == (1, 4, 7, 6, 9)
+    torch.testing.assert_close(fast, ref, rtol=1e-4, atol=1e-4)
+
+
+def test_training_mode_keeps_autograd() -> None:
+    from diathermy.surrogates.layers import _use_onednn_directly
+
+    w = torch.randn(2, 2, 3, 3, 3, requires_grad=True)
+    assert not _use_onednn_directly(torch.randn(1, 2, 4, 4, 4), w)
+    model = DisplacementCNN(CNNConfig(width=2, depth=1))
+    model(torch.randn(1, 2, 5, 5, 5)).sum().backward()
+    assert model.stem.conv.weight.grad is not None

@@ -14,7 +14,7 @@ from typing import Any
 import torch
 from torch import nn
 
-from diathermy.surrogates.layers import ConvAct, PooledBranch
+from diathermy.surrogates.layers import ConvAct, PooledBranch, conv3d_same
 from diathermy.surrogates.normalization import FieldNormalizer, FieldScales
 
 IN_CHANNELS = 2  # (p - p0) / p_scale, phi / phi_scale
@@ -60,7 +60,7 @@ class DisplacementCNN(nn.Module):
         """(N, 2, D, H, W) normalised inputs -> (N, 3, D, H, W) normalised displacement."""
         h = self.stem(x)
         y = self.trunk(h) + self.branch2(h) + self.branch4(h)
-        return self.out(self.head(y))
+        return conv3d_same(self.head(y), self.out.weight, self.out.bias)
 
     def predict_displacement(
         self, pressure_pa: torch.Tensor, level_set_m: torch.Tensor

@@ -9,6 +9,30 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
+# PyTorch sends a batch-1 conv3d to oneDNN only when N*C*D*H > 20480 and otherwise to a generic
+# path 10-25x slower (benchmarks/results/cnn.md); inference calls oneDNN directly instead.
+_ONEDNN_THRESHOLD = 20480
+
+
+def _use_onednn_directly(x: torch.Tensor, weight: torch.Tensor) -> bool:
+    return (
+        x.device.type == "cpu"
+        and x.dtype == torch.float32
+        and weight.dtype == torch.float32
+        and x.shape[0] * x.shape[1] * x.shape[2] * x.shape[3] <= _ONEDNN_THRESHOLD
+        and not (torch.is_grad_enabled() and (x.requires_grad or weight.requires_grad))
+        and not torch.is_autocast_enabled("cpu")
+        and torch.backends.mkldnn.is_available()
+    )
+
+
+def conv3d_same(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor | None) -> torch.Tensor:
+    """Stride-1 'same' Conv3d (odd kernel): (N, C_in, D, H, W) -> (N, C_out, D, H, W)."""
+    pad = weight.shape[-1] // 2
+    if _use_onednn_directly(x, weight):
+        return torch.mkldnn_convolution(x, weight, bias, (pad,) * 3, (1, 1, 1), (1, 1, 1), 1)
+    return F.conv3d(x, weight, bias, padding=pad)
+
 
 class ConvAct(nn.Module):
     """Conv3d with 'same' padding followed by a leaky ReLU: (N, C_in, D, H, W) -> (N, C_out, D, H, W)."""
@@ -23,7 +47,7 @@ class ConvAct(nn.Module):
         self.negative_slope = negative_slope
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return F.leaky_relu(self.conv(x), self.negative_slope)
+        return F.leaky_relu(conv3d_same(x, self.conv.weight, self.conv.bias), self.negative_slope)
 
 
 class PooledBranch(nn.Module):
