@@ -64,3 +64,23 @@ def test_building_the_parser_does_not_import_torch() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env
     )
     assert proc.stdout.strip() == "False"
+
+
+def test_evaluate_reports_strain_energy_errors(
+    tiny_dataset: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import json
+
+    out = tmp_path / "model.pt"
+    argv = ["train", str(tiny_dataset), "--out", str(out), "--epochs", "1", "--width", "4",
+            "--depth", "2", "--quiet"]  # fmt: skip
+    assert main(argv) == 0
+    report = tmp_path / "eval.json"
+    assert main(["evaluate", str(out), str(tiny_dataset), "--subset", "validation",
+                 "--json", str(report)]) == 0  # fmt: skip
+    assert "strain-energy error mean" in capsys.readouterr().out
+    data = json.loads(report.read_text())
+    assert data["summary"]["samples"] == 8  # 2 validation scenarios x 4 steps
+    assert all(e >= 0 for e in data["strain_energy_error"])
+    assert main(["evaluate", str(out), str(tiny_dataset), "--folds", "2", "--quiet"]) == 0
+    assert "2-fold cross-validation by scenario" in capsys.readouterr().out
