@@ -136,6 +136,11 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("schema", help="print the scene JSON Schema")
     s.add_argument("--out", help="write to this file instead of stdout")
     s.set_defaults(func=_cmd_schema)
+
+    from diathermy.surrogates.cli import add_evaluate_parser, add_train_parser  # no torch import
+
+    add_train_parser(sub)
+    add_evaluate_parser(sub)
     return p
 
 

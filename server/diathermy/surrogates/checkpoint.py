@@ -1,0 +1,136 @@
+"""Versioned CNN checkpoints: constructor args, weights and normaliser buffers, grid, metrics.
+
+The file is a ``torch.save`` of plain dicts, lists, strings, numbers and tensors only, so it loads
+with ``torch.load(weights_only=True)`` (no arbitrary code runs on load).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from diathermy.errors import CheckpointError
+from diathermy.surrogates.cnn import DisplacementCNN
+from diathermy.version import __version__
+
+FORMAT_NAME = "diathermy-cnn"
+FORMAT_VERSION = 1
+_REQUIRED = ("constructor_args", "state_dict", "grid_shape", "spacing_m")
+
+
+@dataclass(frozen=True)
+class LoadedCheckpoint:
+    """A model rebuilt from a checkpoint with everything the file said about it.
+
+    ``training_state`` (epoch, last weights, optimizer state, early-stopping counters) is present
+    only in checkpoints written by the trainer; it is what ``--resume`` continues from.
+    """
+
+    model: DisplacementCNN
+    grid_shape: tuple[int, int, int]
+    spacing_m: tuple[float, float, float]
+    training_config: dict[str, Any] = field(default_factory=dict)
+    metrics: dict[str, Any] = field(default_factory=dict)
+    data: dict[str, Any] = field(default_factory=dict)
+    training_state: dict[str, Any] | None = None
+
+
+def save_checkpoint(
+    path: str | os.PathLike[str],
+    model: DisplacementCNN,
+    *,
+    grid_shape: tuple[int, int, int],
+    spacing_m: tuple[float, float, float],
+    training_config: dict[str, Any] | None = None,
+    metrics: dict[str, Any] | None = None,
+    data: dict[str, Any] | None = None,
+    training_state: dict[str, Any] | None = None,
+) -> None:
+    """Write ``model`` (on any device) atomically to ``path``; grid (nz, ny, nx), spacing (dx, dy, dz) m."""
+    payload: dict[str, Any] = {
+        "format": FORMAT_NAME,
+        "format_version": FORMAT_VERSION,
+        "diathermy_version": __version__,
+        "model": type(model).__name__,
+        "constructor_args": model.constructor_args(),
+        "state_dict": {k: v.detach().cpu().clone() for k, v in model.state_dict().items()},
+        "grid_shape": [int(n) for n in grid_shape],
+        "spacing_m": [float(s) for s in spacing_m],
+        "training_config": dict(training_config or {}),
+        "metrics": dict(metrics or {}),
+        "data": dict(data or {}),
+    }
+    if training_state is not None:
+        payload["training_state"] = training_state
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(payload, tmp)
+    os.replace(tmp, path)  # a crash mid-write never leaves a half checkpoint behind
+
+
+def _read_payload(path: Path) -> dict[str, Any]:
+    if not path.is_file():
+        raise CheckpointError(f"model file {str(path)!r} does not exist")
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as err:  # torch raises many types for garbage input
+        raise CheckpointError(
+            f"{str(path)!r} is not a readable diathermy CNN checkpoint (corrupt, truncated or "
+            f"foreign file; {type(err).__name__})"
+        ) from None
+    if not isinstance(payload, dict) or payload.get("format") != FORMAT_NAME:
+        raise CheckpointError(f"{str(path)!r} is not a diathermy CNN checkpoint (foreign file)")
+    version = payload.get("format_version")
+    if version != FORMAT_VERSION:
+        raise CheckpointError(
+            f"{str(path)!r} has checkpoint format version {version!r}; this diathermy reads "
+            f"version {FORMAT_VERSION} (retrain or convert the model)"
+        )
+    missing = [k for k in _REQUIRED if k not in payload]
+    if missing:
+        raise CheckpointError(f"{str(path)!r} is a corrupt checkpoint: missing {missing}")
+    return payload
+
+
+def load_checkpoint(
+    path: str | os.PathLike[str],
+    *,
+    expected_grid: tuple[int, int, int] | None = None,
+    map_location: str | torch.device = "cpu",
+) -> LoadedCheckpoint:
+    """Read and validate a checkpoint; raises :class:`CheckpointError` with a one-line reason.
+
+    ``expected_grid`` (nz, ny, nx): refuse a model trained for another grid.
+    """
+    path = Path(path)
+    payload = _read_payload(path)
+    grid = (*(int(n) for n in payload["grid_shape"]),)
+    if len(grid) != 3:
+        raise CheckpointError(f"{str(path)!r} is a corrupt checkpoint: grid_shape {grid}")
+    if expected_grid is not None and grid != tuple(int(n) for n in expected_grid):
+        g = "x".join(map(str, grid))
+        e = "x".join(str(int(n)) for n in expected_grid)
+        raise CheckpointError(
+            f"model {str(path)!r} was trained for grid {g} (nodes z x y x x), the scene uses {e}"
+        )
+    try:
+        model = DisplacementCNN.from_constructor_args(payload["constructor_args"])
+        model.load_state_dict(payload["state_dict"], strict=True)
+    except (KeyError, TypeError, ValueError, RuntimeError) as err:
+        reason = str(err).strip().splitlines()[0][:200]
+        raise CheckpointError(f"{str(path)!r} is a corrupt checkpoint: {reason}") from None
+    model.to(map_location).eval()
+    return LoadedCheckpoint(
+        model=model,
+        grid_shape=grid,
+        spacing_m=tuple(float(s) for s in payload["spacing_m"]),  # type: ignore[arg-type]
+        training_config=dict(payload.get("training_config") or {}),
+        metrics=dict(payload.get("metrics") or {}),
+        data=dict(payload.get("data") or {}),
+        training_state=payload.get("training_state"),
+    )

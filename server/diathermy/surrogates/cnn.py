@@ -1,0 +1,92 @@
+"""The 3D CNN surrogate of the mechanics: (p - p0, phi) on the grid -> displacement u.
+
+Architecture (DESIGN.md, "Surrogates -> CNN"): ``depth`` stages of Conv3d + leaky ReLU at full
+resolution; the first stage's output also feeds two branches averaged by 2 and by 4, each
+convolved and upsampled trilinearly to the exact grid size, summed with the full-resolution
+trunk; a 1x1x1 convolution + leaky ReLU and a final 1x1x1 convolution give the three components.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import torch
+from torch import nn
+
+from diathermy.surrogates.layers import ConvAct, PooledBranch, conv3d_same
+from diathermy.surrogates.normalization import FieldNormalizer, FieldScales
+
+IN_CHANNELS = 2  # (p - p0) / p_scale, phi / phi_scale
+OUT_CHANNELS = 3  # u_x, u_y, u_z / u_scale
+
+
+@dataclass(frozen=True)
+class CNNConfig:
+    """Constructor arguments of :class:`DisplacementCNN` (stored verbatim in checkpoints)."""
+
+    width: int = 16
+    depth: int = 5
+    negative_slope: float = 0.01
+
+    def __post_init__(self) -> None:
+        if self.width < 1:
+            raise ValueError(f"width must be >= 1, got {self.width}")
+        if self.depth < 1:
+            raise ValueError(f"depth must be >= 1, got {self.depth}")
+        if not 0.0 <= self.negative_slope < 1.0:
+            raise ValueError(f"negative_slope must lie in [0, 1), got {self.negative_slope}")
+
+
+class DisplacementCNN(nn.Module):
+    """Multi-scale 3D CNN; ``forward`` maps normalised (N, 2, D, H, W) to normalised (N, 3, D, H, W).
+
+    Use :meth:`predict_displacement` for physical units (Pa, m in; m out).
+    """
+
+    def __init__(self, config: CNNConfig | None = None, scales: FieldScales | None = None) -> None:
+        super().__init__()
+        self.config = config or CNNConfig()
+        w, slope = self.config.width, self.config.negative_slope
+        self.normalizer = FieldNormalizer(scales or FieldScales())
+        self.stem = ConvAct(IN_CHANNELS, w, 3, slope)
+        self.trunk = nn.Sequential(*(ConvAct(w, w, 3, slope) for _ in range(self.config.depth - 1)))
+        self.branch2 = PooledBranch(w, 2, slope)
+        self.branch4 = PooledBranch(w, 4, slope)
+        self.head = ConvAct(w, w, 1, slope)
+        self.out = nn.Conv3d(w, OUT_CHANNELS, 1)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """(N, 2, D, H, W) normalised inputs -> (N, 3, D, H, W) normalised displacement."""
+        h = self.stem(x)
+        y = self.trunk(h) + self.branch2(h) + self.branch4(h)
+        return conv3d_same(self.head(y), self.out.weight, self.out.bias)
+
+    def predict_displacement(
+        self, pressure_pa: torch.Tensor, level_set_m: torch.Tensor
+    ) -> torch.Tensor:
+        """(N, D, H, W) absolute pressure in Pa and level set in m -> (N, 3, D, H, W) u in m."""
+        x = self.normalizer.encode_inputs(pressure_pa, level_set_m)
+        return self.normalizer.decode_displacement(self(x))
+
+    def constructor_args(self) -> dict[str, Any]:
+        """Plain-dict constructor arguments (config and scales) for checkpoints."""
+        return {"config": asdict(self.config), "scales": asdict(self.normalizer.scales())}
+
+    @classmethod
+    def from_constructor_args(cls, args: dict[str, Any]) -> DisplacementCNN:
+        """Inverse of :meth:`constructor_args`."""
+        return cls(CNNConfig(**args["config"]), FieldScales(**args["scales"]))
+
+    @classmethod
+    def from_checkpoint(
+        cls, path: str, *, expected_grid: tuple[int, int, int] | None = None
+    ) -> DisplacementCNN:
+        """Rebuild exactly the trained model (weights and normaliser buffers) from a file."""
+        from diathermy.surrogates.checkpoint import load_checkpoint
+
+        return load_checkpoint(path, expected_grid=expected_grid).model
+
+    def n_parameters(self) -> int:
+        """Number of trainable scalars."""
+        return sum(p.numel() for p in self.parameters() if p.requires_grad)

@@ -1,0 +1,410 @@
+"""Training loop of the CNN: Adam on the L2 displacement error, scenario-wise validation, early
+stopping, resumable checkpoints, mixed precision and ``torch.distributed`` data parallelism.
+
+Launch data-parallel runs with ``torchrun --nproc_per_node N -m diathermy train ...``; the
+process group is set up from the environment torchrun provides (NCCL on GPUs, gloo on CPUs).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import copy
+import math
+import os
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import torch.distributed as dist
+from torch.nn.parallel import DistributedDataParallel
+from torch.utils.data import DataLoader, DistributedSampler
+from tqdm import tqdm
+
+from diathermy.errors import CheckpointError
+from diathermy.surrogates.checkpoint import load_checkpoint, save_checkpoint
+from diathermy.surrogates.cnn import CNNConfig, DisplacementCNN
+from diathermy.surrogates.data import (
+    DatasetInfo,
+    FieldDataset,
+    read_dataset_info,
+    read_samples,
+    split_scenarios,
+)
+from diathermy.surrogates.losses import l2_loss, relative_l2_per_sample
+from diathermy.surrogates.normalization import fit_scales
+
+AMP_DTYPES = {"none": None, "bf16": torch.bfloat16, "fp16": torch.float16}
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Hyper-parameters of one training run (stored in the checkpoint)."""
+
+    width: int = 16
+    depth: int = 5
+    epochs: int = 50
+    batch_size: int = 4
+    lr: float = 1e-3
+    val_fraction: float = 0.2
+    patience: int = 10
+    seed: int = 0
+    amp: str = "none"  # "none", "bf16" or "fp16" (fp16 needs CUDA)
+    device: str = "auto"  # "auto", "cpu", "cuda", "cuda:1", ...
+    num_workers: int = 0
+    scale_samples: int = 256  # training samples used to fit the normaliser
+
+    def __post_init__(self) -> None:
+        checks = {
+            "epochs": self.epochs >= 0,
+            "batch_size": self.batch_size >= 1,
+            "lr": math.isfinite(self.lr) and self.lr > 0,
+            "patience": self.patience >= 1,
+            "num_workers": self.num_workers >= 0,
+            "scale_samples": self.scale_samples >= 1,
+        }
+        for name, ok in checks.items():
+            if not ok:
+                raise CheckpointError(f"training option {name} is invalid: {getattr(self, name)!r}")
+        if self.amp not in AMP_DTYPES:
+            raise CheckpointError(f"amp must be one of {sorted(AMP_DTYPES)}, got {self.amp!r}")
+        CNNConfig(width=self.width, depth=self.depth)
+
+
+@dataclass(frozen=True)
+class TrainResult:
+    """What a run did: where the best model went, and the per-epoch history."""
+
+    checkpoint: Path
+    epochs_run: int
+    best_epoch: int
+    best_val_loss: float
+    best_val_rel_l2: float
+    stopped_early: bool
+    history: tuple[dict[str, float], ...]
+    train_scenarios: tuple[int, ...]
+    val_scenarios: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class _Dist:
+    rank: int = 0
+    world_size: int = 1
+    local_rank: int = 0
+    active: bool = False
+
+    @property
+    def is_main(self) -> bool:
+        return self.rank == 0
+
+
+def _init_distributed(device_kind: str) -> _Dist:
+    """Join the process group torchrun describes in the environment (no-op when not launched so)."""
+    if "RANK" not in os.environ or "WORLD_SIZE" not in os.environ:
+        return _Dist()
+    if not dist.is_initialized():
+        dist.init_process_group(backend="nccl" if device_kind == "cuda" else "gloo")
+    return _Dist(
+        rank=dist.get_rank(),
+        world_size=dist.get_world_size(),
+        local_rank=int(os.environ.get("LOCAL_RANK", "0")),
+        active=True,
+    )
+
+
+def resolve_device(name: str, local_rank: int = 0) -> torch.device:
+    """Device "auto" -> the local GPU when CUDA is available, else the CPU."""
+    if name == "auto":
+        return torch.device(f"cuda:{local_rank}" if torch.cuda.is_available() else "cpu")
+    device = torch.device(name)
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise CheckpointError(f"device {name!r} requested but CUDA is not available")
+    return device
+
+
+@contextlib.contextmanager
+def _deterministic(enabled: bool) -> Iterator[None]:
+    """Deterministic kernels for the duration of a CPU run, restoring the global flag after."""
+    previous = torch.are_deterministic_algorithms_enabled()
+    torch.use_deterministic_algorithms(enabled or previous)
+    try:
+        yield
+    finally:
+        torch.use_deterministic_algorithms(previous)
+
+
+def _batches(
+    dataset: FieldDataset, batch_size: int, sampler: DistributedSampler | None, workers: int
+) -> DataLoader:
+    return DataLoader(
+        dataset, batch_size=batch_size, sampler=sampler, shuffle=False, num_workers=workers
+    )
+
+
+def _scale_indices(indices: np.ndarray, n: int) -> np.ndarray:
+    if indices.size <= n:
+        return indices
+    return indices[np.linspace(0, indices.size - 1, n).round().astype(np.int64)]
+
+
+def _evaluate_loss(
+    model: torch.nn.Module,
+    net: DisplacementCNN,
+    loader: DataLoader,
+    device: torch.device,
+    autocast: Callable[[], contextlib.AbstractContextManager[Any]],
+) -> tuple[float, float]:
+    """(mean normalised L2 loss, mean relative L2 error of u) over a loader."""
+    model.eval()
+    total, rel, count = 0.0, 0.0, 0
+    with torch.inference_mode():
+        for p, phi, u in loader:
+            p, phi, u = p.to(device), phi.to(device), u.to(device)
+            with autocast():
+                pred = model(net.normalizer.encode_inputs(p, phi)).float()
+            target = net.normalizer.encode_displacement(u)
+            total += float(l2_loss(pred, target)) * p.shape[0]
+            rel += float(relative_l2_per_sample(pred, target).sum())
+            count += p.shape[0]
+    return total / max(count, 1), rel / max(count, 1)
+
+
+def _start_state(
+    info: DatasetInfo,
+    config: TrainConfig,
+    resume: str | os.PathLike[str] | None,
+    split: tuple[tuple[int, ...], tuple[int, ...]] | None,
+) -> tuple[DisplacementCNN, dict[str, Any] | None, tuple[tuple[int, ...], tuple[int, ...]]]:
+    """The model to train (fresh or resumed), the resumed training state, the scenario split."""
+    if resume is not None:
+        ckpt = load_checkpoint(resume, expected_grid=info.grid_shape)
+        if ckpt.training_state is None:
+            raise CheckpointError(f"{str(resume)!r} holds no training state to resume from")
+        model = ckpt.model
+        model.load_state_dict(ckpt.training_state["model_state"])
+        train_s = tuple(int(s) for s in ckpt.data.get("train_scenarios", ()))
+        val_s = tuple(int(s) for s in ckpt.data.get("val_scenarios", ()))
+        return model, ckpt.training_state, (train_s, val_s)
+    if split is None:
+        split = split_scenarios(info.complete_scenarios(), config.val_fraction, config.seed)
+    p, phi, u = read_samples(
+        info.path, _scale_indices(info.sample_indices(split[0]), config.scale_samples)
+    )
+    p0 = info.p0_pa
+    torch.manual_seed(config.seed)
+    model = DisplacementCNN(
+        CNNConfig(width=config.width, depth=config.depth), fit_scales(p, phi, u, p0_pa=p0)
+    )
+    return model, None, split
+
+
+def train(
+    data_path: str | os.PathLike[str],
+    out_path: str | os.PathLike[str],
+    config: TrainConfig,
+    *,
+    resume: str | os.PathLike[str] | None = None,
+    split: tuple[tuple[int, ...], tuple[int, ...]] | None = None,
+    progress: bool = True,
+) -> TrainResult:
+    """Train a CNN on a dataset file and write the best model (by validation loss) to ``out_path``.
+
+    ``split`` = (train scenarios, validation scenarios) overrides the seeded random split (used by
+    cross-validation); ``resume`` continues a checkpoint written by this function (same split,
+    same normaliser, its optimizer state and epoch counter).
+    """
+    info = read_dataset_info(data_path)
+    want_cuda = config.device.startswith("cuda") or (
+        config.device == "auto" and torch.cuda.is_available()
+    )
+    amp_dtype = AMP_DTYPES[config.amp]
+    device = resolve_device(config.device, int(os.environ.get("LOCAL_RANK", "0")))
+    if amp_dtype is torch.float16 and device.type != "cuda":
+        raise CheckpointError("fp16 mixed precision needs a CUDA device; use --amp bf16 on CPU")
+    owns_group = not (dist.is_available() and dist.is_initialized())
+    ctx = _init_distributed("cuda" if want_cuda else "cpu")
+    if device.type == "cuda":
+        torch.cuda.set_device(device)
+    try:
+        with _deterministic(device.type == "cpu"):
+            return _train(
+                info, Path(out_path), config, ctx, device, amp_dtype, resume, split, progress
+            )
+    finally:
+        if ctx.active and owns_group:
+            dist.destroy_process_group()
+
+
+def _train(
+    info: DatasetInfo,
+    out_path: Path,
+    config: TrainConfig,
+    ctx: _Dist,
+    device: torch.device,
+    amp_dtype: torch.dtype | None,
+    resume: str | os.PathLike[str] | None,
+    split: tuple[tuple[int, ...], tuple[int, ...]] | None,
+    progress: bool,
+) -> TrainResult:
+    net, state, (train_s, val_s) = _start_state(info, config, resume, split)
+    if set(train_s) & set(val_s) or not train_s or not val_s:
+        raise CheckpointError(f"bad scenario split: train {train_s}, validation {val_s}")
+    net.to(device)
+    model: torch.nn.Module = net
+    if ctx.active:
+        model = DistributedDataParallel(
+            net, device_ids=[device.index] if device.type == "cuda" else None
+        )
+    optimizer = torch.optim.Adam(net.parameters(), lr=config.lr)
+    scaler = torch.amp.GradScaler("cuda", enabled=amp_dtype is torch.float16)
+    start_epoch, best_val, best_rel, best_epoch, bad = 0, math.inf, math.inf, -1, 0
+    history: list[dict[str, float]] = []
+    best_weights = copy.deepcopy(net.state_dict())
+    if state is not None:
+        optimizer.load_state_dict(state["optimizer_state"])
+        if "scaler_state" in state and scaler.is_enabled():
+            scaler.load_state_dict(state["scaler_state"])
+        start_epoch, bad = int(state["epoch"]), int(state["bad_epochs"])
+        best_val, best_rel = float(state["best_val_loss"]), float(state["best_val_rel_l2"])
+        best_epoch = int(state["best_epoch"])
+        history = [dict(h) for h in state["history"]]
+        best_weights = load_checkpoint(resume).model.state_dict()  # type: ignore[arg-type]
+
+    train_ds = FieldDataset(info.path, info.sample_indices(train_s))
+    val_ds = FieldDataset(info.path, info.sample_indices(val_s))
+    sampler: DistributedSampler[Any] = DistributedSampler(
+        train_ds, num_replicas=ctx.world_size, rank=ctx.rank, shuffle=True, seed=config.seed
+    )
+    train_loader = _batches(train_ds, config.batch_size, sampler, config.num_workers)
+    val_loader = _batches(val_ds, config.batch_size, None, config.num_workers)
+
+    def autocast() -> contextlib.AbstractContextManager[Any]:
+        if amp_dtype is None:
+            return contextlib.nullcontext()
+        return torch.autocast(device_type=device.type, dtype=amp_dtype)
+
+    total_steps = max(config.epochs - start_epoch, 0) * len(train_loader)
+    bar = tqdm(
+        total=total_steps, disable=not (progress and ctx.is_main), unit="batch", dynamic_ncols=True
+    )
+    epoch, stopped = start_epoch, bad >= config.patience
+    try:
+        for epoch in range(start_epoch, config.epochs):
+            if stopped:
+                break
+            t0 = time.perf_counter()
+            sampler.set_epoch(epoch)
+            model.train()
+            running, seen = 0.0, 0
+            for p, phi, u in train_loader:
+                p, phi, u = p.to(device), phi.to(device), u.to(device)
+                optimizer.zero_grad(set_to_none=True)
+                with autocast():
+                    pred = model(net.normalizer.encode_inputs(p, phi))
+                loss = l2_loss(pred, net.normalizer.encode_displacement(u))
+                scaler.scale(loss).backward()
+                scaler.step(optimizer)
+                scaler.update()
+                running += float(loss.detach()) * p.shape[0]
+                seen += p.shape[0]
+                bar.update(1)
+                bar.set_postfix(
+                    epoch=epoch + 1, loss=f"{running / seen:.4g}", val=f"{best_val:.4g}"
+                )
+            val_loss, val_rel = _evaluate_loss(model, net, val_loader, device, autocast)
+            if val_loss < best_val:
+                best_val, best_rel, best_epoch, bad = val_loss, val_rel, epoch + 1, 0
+                best_weights = copy.deepcopy(net.state_dict())
+            else:
+                bad += 1
+            stopped = bad >= config.patience
+            history.append(
+                {
+                    "epoch": float(epoch + 1),
+                    "train_loss": running / max(seen, 1),
+                    "val_loss": val_loss,
+                    "val_rel_l2": val_rel,
+                    "seconds": time.perf_counter() - t0,
+                }
+            )
+            if ctx.is_main:
+                _save(
+                    out_path,
+                    net,
+                    best_weights,
+                    info,
+                    config,
+                    train_s,
+                    val_s,
+                    {
+                        "epoch": epoch + 1,
+                        "model_state": {
+                            k: v.detach().cpu().clone() for k, v in net.state_dict().items()
+                        },
+                        "optimizer_state": optimizer.state_dict(),
+                        "scaler_state": scaler.state_dict(),
+                        "best_val_loss": best_val,
+                        "best_val_rel_l2": best_rel,
+                        "best_epoch": best_epoch,
+                        "bad_epochs": bad,
+                        "history": history,
+                    },
+                )
+            if ctx.active:
+                dist.barrier()
+    finally:
+        bar.close()
+    if ctx.is_main and not history and resume is None:  # epochs=0: still write a usable model
+        _save(out_path, net, best_weights, info, config, train_s, val_s, None)
+    epochs_run = len(history)
+    return TrainResult(
+        checkpoint=out_path,
+        epochs_run=epochs_run,
+        best_epoch=best_epoch,
+        best_val_loss=best_val,
+        best_val_rel_l2=best_rel,
+        stopped_early=stopped,
+        history=tuple(history),
+        train_scenarios=train_s,
+        val_scenarios=val_s,
+    )
+
+
+def _save(
+    out_path: Path,
+    net: DisplacementCNN,
+    best_weights: dict[str, torch.Tensor],
+    info: DatasetInfo,
+    config: TrainConfig,
+    train_s: tuple[int, ...],
+    val_s: tuple[int, ...],
+    training_state: dict[str, Any] | None,
+) -> None:
+    """Checkpoint whose weights are the best so far and whose training state is the latest."""
+    best = DisplacementCNN.from_constructor_args(net.constructor_args())
+    best.load_state_dict(best_weights)
+    metrics: dict[str, Any] = {}
+    if training_state is not None:
+        metrics = {
+            "best_val_loss": training_state["best_val_loss"],
+            "best_val_rel_l2": training_state["best_val_rel_l2"],
+            "best_epoch": training_state["best_epoch"],
+            "epochs_run": training_state["epoch"],
+        }
+    save_checkpoint(
+        out_path,
+        best,
+        grid_shape=info.grid_shape,
+        spacing_m=info.spacing_m,
+        training_config=asdict(config),
+        metrics=metrics,
+        data={
+            "path": str(info.path),
+            "train_scenarios": list(train_s),
+            "val_scenarios": list(val_s),
+        },
+        training_state=training_state,
+    )

@@ -1,0 +1,86 @@
+"""``diathermy train`` / ``evaluate`` from the command line: results and one-line errors."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from diathermy.cli import main
+from diathermy.surrogates import load_checkpoint
+
+
+def test_train_writes_a_checkpoint(
+    tiny_dataset: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "model.pt"
+    argv = ["train", str(tiny_dataset), "--out", str(out), "--epochs", "2", "--width", "4",
+            "--depth", "2", "--seed", "1", "--quiet"]  # fmt: skip
+    assert main(argv) == 0
+    assert "trained 2 epochs" in capsys.readouterr().out
+    ckpt = load_checkpoint(out, expected_grid=(9, 9, 17))
+    assert ckpt.model.config.width == 4 and ckpt.training_config["seed"] == 1
+    assert main([*argv[:-1], "--epochs", "3", "--resume", str(out), "--quiet"]) == 0
+    assert load_checkpoint(out).training_state["epoch"] == 3  # type: ignore[index]
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["train", "missing.h5", "--out", "m.pt"], "does not exist"),
+        (["train", "DATA", "--out", "m.pt", "--width", "0"], "positive integer"),
+        (["train", "DATA", "--out", "m.pt", "--val-fraction", "1.5"], "fraction"),
+        (["train", "DATA", "--out", "m.pt", "--amp", "fp16", "--device", "cpu"], "fp16"),
+        (["train", "DATA", "--out", "m.pt", "--device", "cuda:7"], "CUDA"),
+        (["evaluate", "DATA", "DATA"], "not a readable diathermy CNN checkpoint"),
+        (["evaluate", "missing.pt", "DATA"], "does not exist"),
+    ],
+)
+def test_errors_are_one_line(
+    argv: list[str], message: str, tiny_dataset: Path, tmp_path: Path,
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+) -> None:  # fmt: skip
+    monkeypatch.chdir(tmp_path)
+    argv = [str(tiny_dataset) if a == "DATA" else a for a in argv]
+    if argv[0] == "train" and "--device" in argv and "cuda" in argv[-1]:
+        monkeypatch.setattr("torch.cuda.is_available", lambda: False)
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse errors exit with status 2
+        code = exc.code
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert message in err[-1] and "error:" in err[-1]
+    assert "Traceback" not in "\n".join(err)
+
+
+def test_building_the_parser_does_not_import_torch() -> None:
+    code = "import sys; from diathermy.cli import build_parser; build_parser(); print('torch' in sys.modules)"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    proc = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env
+    )
+    assert proc.stdout.strip() == "False"
+
+
+def test_evaluate_reports_strain_energy_errors(
+    tiny_dataset: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import json
+
+    out = tmp_path / "model.pt"
+    argv = ["train", str(tiny_dataset), "--out", str(out), "--epochs", "1", "--width", "4",
+            "--depth", "2", "--quiet"]  # fmt: skip
+    assert main(argv) == 0
+    report = tmp_path / "eval.json"
+    assert main(["evaluate", str(out), str(tiny_dataset), "--subset", "validation",
+                 "--json", str(report)]) == 0  # fmt: skip
+    assert "strain-energy error mean" in capsys.readouterr().out
+    data = json.loads(report.read_text())
+    assert data["summary"]["samples"] == 8  # 2 validation scenarios x 4 steps
+    assert all(e >= 0 for e in data["strain_energy_error"])
+    assert main(["evaluate", str(out), str(tiny_dataset), "--folds", "2", "--quiet"]) == 0
+    assert "2-fold cross-validation by scenario" in capsys.readouterr().out

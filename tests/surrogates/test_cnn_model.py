@@ -1,0 +1,166 @@
+"""The CNN's shapes, its normaliser and its checkpoints."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from diathermy.errors import CheckpointError
+from diathermy.surrogates import (
+    CNNConfig,
+    DisplacementCNN,
+    FieldScales,
+    load_checkpoint,
+    predict,
+    save_checkpoint,
+)
+
+
+def _fields(grid: tuple[int, int, int], seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    return 101325.0 + 1e4 * rng.random(grid), 1e-2 * rng.standard_normal(grid)
+
+
+@pytest.mark.parametrize("grid", [(9, 9, 17), (8, 8, 16), (5, 7, 6), (3, 3, 3), (2, 4, 9)])
+def test_output_has_the_input_grid_shape(grid: tuple[int, int, int]) -> None:
+    torch.manual_seed(0)
+    model = DisplacementCNN(CNNConfig(width=4, depth=3))
+    p, phi = _fields(grid)
+    u = predict(model, p, phi)
+    assert u.shape == (*grid, 3) and u.dtype == np.float32 and np.all(np.isfinite(u))
+    batch = predict(model, np.stack([p, p]), np.stack([phi, phi]))
+    assert batch.shape == (2, *grid, 3)
+    np.testing.assert_allclose(batch[0], u, rtol=1e-5, atol=1e-12)
+
+
+def test_odd_paper_sized_grid_forward() -> None:
+    model = DisplacementCNN(CNNConfig(width=2, depth=2))
+    x = torch.zeros(1, 2, 33, 33, 65)
+    assert model(x).shape == (1, 3, 33, 33, 65)
+
+
+def test_branches_reach_beyond_the_trunk_receptive_field() -> None:
+    # With depth 1 the full-resolution trunk sees +-1 node; the pooled-by-4 branch sees further.
+    torch.manual_seed(0)
+    model = DisplacementCNN(CNNConfig(width=4, depth=1)).eval()
+    x = torch.zeros(1, 2, 16, 16, 16)
+    x2 = x.clone()
+    x2[0, 0, 0, 0, 0] = 1.0
+    with torch.no_grad():
+        diff = (model(x2) - model(x)).abs()[0].sum(0)
+    assert diff[8, 8, 8] > 0  # 8 nodes away: only the pooled branches can carry it
+
+
+def test_normaliser_maps_physical_units() -> None:
+    scales = FieldScales(p0_pa=1e5, pressure_scale_pa=2e3, level_set_scale_m=0.5e-2,
+                         displacement_scale_m=3e-5)  # fmt: skip
+    model = DisplacementCNN(CNNConfig(width=2, depth=1), scales)
+    p = torch.full((1, 2, 2, 2), 1e5 + 4e3)
+    phi = torch.full((1, 2, 2, 2), 1e-2)
+    x = model.normalizer.encode_inputs(p, phi)
+    assert torch.allclose(x[:, 0], torch.full_like(p, 2.0))
+    assert torch.allclose(x[:, 1], torch.full_like(p, 2.0))
+    y = torch.ones(1, 3, 2, 2, 2)
+    assert torch.allclose(model.normalizer.decode_displacement(y), 3e-5 * y)
+    assert "normalizer.pressure_scale_pa" in model.state_dict()
+
+
+def test_invalid_config_is_refused() -> None:
+    with pytest.raises(ValueError, match="width"):
+        CNNConfig(width=0)
+    with pytest.raises(ValueError, match="pressure_scale_pa"):
+        FieldScales(pressure_scale_pa=0.0)
+
+
+def _saved(tmp_path: Path, grid: tuple[int, int, int] = (9, 9, 17)) -> tuple[Path, DisplacementCNN]:
+    torch.manual_seed(3)
+    scales = FieldScales(pressure_scale_pa=5e3, level_set_scale_m=2e-3, displacement_scale_m=1e-5)
+    model = DisplacementCNN(CNNConfig(width=4, depth=2, negative_slope=0.05), scales)
+    path = tmp_path / "m.pt"
+    save_checkpoint(path, model, grid_shape=grid, spacing_m=(0.0125, 0.0125, 0.0125),
+                    training_config={"lr": 1e-3}, metrics={"best_val_loss": 0.5})  # fmt: skip
+    return path, model
+
+
+def test_checkpoint_round_trip_gives_identical_outputs(tmp_path: Path) -> None:
+    path, model = _saved(tmp_path)
+    loaded = load_checkpoint(path, expected_grid=(9, 9, 17))
+    assert loaded.model.config == model.config
+    assert loaded.model.normalizer.scales() == model.normalizer.scales()
+    assert loaded.grid_shape == (9, 9, 17) and loaded.metrics == {"best_val_loss": 0.5}
+    p, phi = _fields((9, 9, 17), seed=1)
+    np.testing.assert_array_equal(predict(loaded.model, p, phi), predict(model.eval(), p, phi))
+    again = DisplacementCNN.from_checkpoint(str(path))
+    np.testing.assert_array_equal(predict(again, p, phi), predict(model, p, phi))
+    # plain content: loads with the safe unpickler
+    assert isinstance(torch.load(path, weights_only=True), dict)
+
+
+def test_checkpoint_for_another_grid_is_refused(tmp_path: Path) -> None:
+    path, _ = _saved(tmp_path)
+    with pytest.raises(CheckpointError, match=r"trained for grid 9x9x17.*33x33x65"):
+        load_checkpoint(path, expected_grid=(33, 33, 65))
+
+
+def test_corrupt_foreign_and_future_files_are_refused(tmp_path: Path) -> None:
+    path, _ = _saved(tmp_path)
+    truncated = tmp_path / "truncated.pt"
+    truncated.write_bytes(path.read_bytes()[:200])
+    garbage = tmp_path / "garbage.pt"
+    garbage.write_bytes(b"not a checkpoint at all")
+    foreign = tmp_path / "foreign.pt"
+    torch.save({"state_dict": {}, "epoch": 3}, foreign)
+    future = tmp_path / "future.pt"
+    payload = torch.load(path, weights_only=True)
+    payload["format_version"] = 99
+    torch.save(payload, future)
+    broken = tmp_path / "broken.pt"
+    payload = torch.load(path, weights_only=True)
+    del payload["state_dict"]["out.weight"]
+    torch.save(payload, broken)
+    cases = {
+        truncated: "corrupt",
+        garbage: "corrupt",
+        foreign: "foreign",
+        future: "version 99",
+        broken: "corrupt checkpoint",
+        tmp_path / "missing.pt": "does not exist",
+    }
+    for bad, message in cases.items():
+        with pytest.raises(CheckpointError, match=message) as info:
+            load_checkpoint(bad)
+        assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("kernel", [1, 3])
+@pytest.mark.parametrize("channels_last", [False, True])
+def test_direct_onednn_conv_matches_the_reference(kernel: int, channels_last: bool) -> None:
+    """The inference fast path against the plain F.conv3d twin (PyTorch's generic route)."""
+    from torch.nn import functional as F
+
+    from diathermy.surrogates.layers import _use_onednn_directly, conv3d_same
+
+    torch.manual_seed(0)
+    x = torch.randn(1, 5, 7, 6, 9)
+    w, b = torch.randn(4, 5, kernel, kernel, kernel), torch.randn(4)
+    if channels_last:
+        x = x.contiguous(memory_format=torch.channels_last_3d)
+    with torch.inference_mode():
+        assert _use_onednn_directly(x, w)
+        fast = conv3d_same(x, w, b)
+    ref = F.conv3d(x, w, b, padding=kernel // 2)
+    assert fast.shape == ref.shape == (1, 4, 7, 6, 9)
+    torch.testing.assert_close(fast, ref, rtol=1e-4, atol=1e-4)
+
+
+def test_training_mode_keeps_autograd() -> None:
+    from diathermy.surrogates.layers import _use_onednn_directly
+
+    w = torch.randn(2, 2, 3, 3, 3, requires_grad=True)
+    assert not _use_onednn_directly(torch.randn(1, 2, 4, 4, 4), w)
+    model = DisplacementCNN(CNNConfig(width=2, depth=1))
+    model(torch.randn(1, 2, 5, 5, 5)).sum().backward()
+    assert model.stem.conv.weight.grad is not None

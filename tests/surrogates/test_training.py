@@ -1,0 +1,121 @@
+"""Training: it learns, it is deterministic, it resumes, it never mixes scenarios."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+import torch
+
+from diathermy.errors import CheckpointError
+from diathermy.surrogates import load_checkpoint
+from diathermy.surrogates.training import TrainConfig, train
+
+FAST = TrainConfig(width=6, depth=3, epochs=6, batch_size=4, lr=3e-3, patience=50, seed=7)
+
+
+def _weights(path: Path) -> dict[str, torch.Tensor]:
+    return load_checkpoint(path).model.state_dict()
+
+
+def test_training_lowers_the_validation_error(tiny_dataset: Path, tmp_path: Path) -> None:
+    result = train(tiny_dataset, tmp_path / "m.pt", FAST, progress=False)
+    val = [h["val_loss"] for h in result.history]
+    assert result.epochs_run == 6
+    assert val[-1] < 0.8 * val[0]
+    assert result.best_val_loss == min(val)
+    ckpt = load_checkpoint(tmp_path / "m.pt", expected_grid=(9, 9, 17))
+    assert ckpt.metrics["best_epoch"] == result.best_epoch
+    assert ckpt.training_config["width"] == 6
+
+
+def test_validation_scenarios_are_held_out_whole(tiny_dataset: Path, tmp_path: Path) -> None:
+    result = train(tiny_dataset, tmp_path / "m.pt", replace(FAST, epochs=1), progress=False)
+    assert set(result.train_scenarios).isdisjoint(result.val_scenarios)
+    assert sorted(result.train_scenarios + result.val_scenarios) == list(range(6))
+    data = load_checkpoint(tmp_path / "m.pt").data
+    assert data["val_scenarios"] == list(result.val_scenarios)
+    with h5py.File(tiny_dataset) as f:
+        scen = f["scenario"][...]
+    # every step of a validation scenario is in the validation set, none in training
+    from diathermy.surrogates.data import read_dataset_info
+
+    info = read_dataset_info(tiny_dataset)
+    assert set(scen[info.sample_indices(result.val_scenarios)]) == set(result.val_scenarios)
+    assert set(scen[info.sample_indices(result.train_scenarios)]).isdisjoint(result.val_scenarios)
+
+
+def test_same_seed_gives_the_same_weights(tiny_dataset: Path, tmp_path: Path) -> None:
+    cfg = replace(FAST, epochs=2)
+    train(tiny_dataset, tmp_path / "a.pt", cfg, progress=False)
+    train(tiny_dataset, tmp_path / "b.pt", cfg, progress=False)
+    train(tiny_dataset, tmp_path / "c.pt", replace(cfg, seed=8), progress=False)
+    a, b, c = (_weights(tmp_path / n) for n in ("a.pt", "b.pt", "c.pt"))
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    assert not all(torch.equal(a[k], c[k]) for k in a)
+
+
+def test_resume_continues_where_it_stopped(tiny_dataset: Path, tmp_path: Path) -> None:
+    full = train(tiny_dataset, tmp_path / "full.pt", replace(FAST, epochs=4), progress=False)
+    train(tiny_dataset, tmp_path / "part.pt", replace(FAST, epochs=2), progress=False)
+    resumed = train(
+        tiny_dataset, tmp_path / "part.pt", replace(FAST, epochs=4),
+        resume=tmp_path / "part.pt", progress=False,
+    )  # fmt: skip
+    assert resumed.epochs_run == 4 and len(resumed.history) == 4
+    assert [h["val_loss"] for h in resumed.history] == [h["val_loss"] for h in full.history]
+    a, b = _weights(tmp_path / "full.pt"), _weights(tmp_path / "part.pt")
+    assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_early_stopping(tiny_dataset: Path, tmp_path: Path) -> None:
+    # a learning rate this large diverges, so validation stops improving at once
+    result = train(
+        tiny_dataset, tmp_path / "m.pt", replace(FAST, lr=5.0, epochs=20, patience=2),
+        progress=False,
+    )  # fmt: skip
+    assert result.stopped_early and result.epochs_run < 20
+    assert result.epochs_run - result.best_epoch == 2
+
+
+def test_bf16_autocast_trains_on_cpu(tiny_dataset: Path, tmp_path: Path) -> None:
+    result = train(
+        tiny_dataset, tmp_path / "m.pt", replace(FAST, epochs=1, amp="bf16"), progress=False
+    )
+    assert np.isfinite(result.best_val_loss)
+
+
+def test_bad_options_are_refused(tiny_dataset: Path, tmp_path: Path) -> None:
+    with pytest.raises(CheckpointError, match="amp"):
+        TrainConfig(amp="fp8")
+    with pytest.raises(CheckpointError, match="fp16"):
+        train(tiny_dataset, tmp_path / "m.pt", replace(FAST, amp="fp16", device="cpu"))
+    other = tmp_path / "other.h5"
+    from tests.surrogates.synthetic import write_synthetic_dataset
+
+    write_synthetic_dataset(other, grid=(5, 5, 9), n_scenarios=2, n_steps=1)
+    train(tiny_dataset, tmp_path / "m.pt", replace(FAST, epochs=1), progress=False)
+    with pytest.raises(CheckpointError, match="trained for grid 9x9x17"):
+        train(other, tmp_path / "n.pt", FAST, resume=tmp_path / "m.pt", progress=False)
+
+
+def test_torchrun_data_parallel_with_gloo(tiny_dataset: Path, tmp_path: Path) -> None:
+    """Two CPU processes under torchrun (DistributedSampler + DDP over gloo)."""
+    out = tmp_path / "ddp.pt"
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": os.pathsep.join(sys.path)}
+    cmd = [
+        sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2",
+        "-m", "diathermy", "train", str(tiny_dataset), "--out", str(out), "--epochs", "2",
+        "--width", "4", "--depth", "2", "--batch-size", "2", "--device", "cpu", "--quiet",
+    ]  # fmt: skip
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "trained 2 epochs" in proc.stdout
+    ckpt = load_checkpoint(out)
+    assert ckpt.training_state is not None and ckpt.training_state["epoch"] == 2
