@@ -7,6 +7,9 @@ import pytest
 from hypothesis import HealthCheck, settings
 
 from diathermy.mesh import Grid, TetMesh, build_tet_mesh
+from diathermy.runtime import configure_threads
+
+configure_threads()
 
 # Shared 2-core CI machines are noisy: judge examples by outcome, never by wall time.
 settings.register_profile(

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from diathermy.errors import DiathermyError, SceneError
+from diathermy.runtime import configure_threads
 from diathermy.scene import (
     Scene,
     builtin_scene,
@@ -151,6 +152,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error("--steps must be >= 0")
     if getattr(args, "every", 1) < 1:
         parser.error("--every must be >= 1")
+    configure_threads()
     try:
         return int(args.func(args))
     except DiathermyError as err:

@@ -40,7 +40,9 @@ class Discretization:
         return nodal[self.mesh.tets].mean(axis=1)
 
 
-def build_discretization(shape: tuple[int, int, int], block_m: tuple[float, float, float]) -> Discretization:
+def build_discretization(
+    shape: tuple[int, int, int], block_m: tuple[float, float, float]
+) -> Discretization:
     """Mesh and reusable geometry of an (nz, ny, nx) grid over a block (Lx, Ly, Lz)."""
     grid = Grid(shape, size_m=block_m)
     mesh = build_tet_mesh(grid)

@@ -45,7 +45,9 @@ class SimulationState:
         self.arrays[name] = value
 
 
-def initial_state(n_nodes: int, n_tets: int, z_nodes: np.ndarray, top_z: float, tissue: Tissue) -> SimulationState:
+def initial_state(
+    n_nodes: int, n_tets: int, z_nodes: np.ndarray, top_z: float, tissue: Tissue
+) -> SimulationState:
     """The state at t = 0: body temperature, no vapor, atmospheric pressure, nothing cut.
 
     The level set starts as the signed distance to the top surface, ``top_z - z`` (m).

@@ -36,7 +36,10 @@ def write_pvd(path: str | Path, entries: list[tuple[float, str]]) -> Path:
         '<?xml version="1.0"?>',
         '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">',
         "  <Collection>",
-        *(f'    <DataSet timestep="{t!r}" group="" part="0" file={quoteattr(f)}/>' for t, f in entries),
+        *(
+            f'    <DataSet timestep="{t!r}" group="" part="0" file={quoteattr(f)}/>'
+            for t, f in entries
+        ),
         "  </Collection>",
         "</VTKFile>",
     ]

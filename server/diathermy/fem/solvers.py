@@ -84,6 +84,15 @@ class KrylovSolver:
         ml = getattr(self, "_ml", None)
         return len(ml.levels) if ml is not None else 0
 
+    @property
+    def warm_start(self) -> np.ndarray | None:
+        """The last solution, the next solve's initial guess (None: start from zero)."""
+        return self._last_x
+
+    @warm_start.setter
+    def warm_start(self, x: np.ndarray | None) -> None:
+        self._last_x = None if x is None else np.asarray(x, dtype=float).copy()
+
     def set_operator(self, A: sp.spmatrix) -> None:
         """Give the solver a new operator; its preconditioner is rebuilt now or on staleness."""
         if self.A is not None and A.shape != self.A.shape:
@@ -100,9 +109,7 @@ class KrylovSolver:
         t0 = time.perf_counter()
         A = self.A
         if self.preconditioner == "amg":
-            self._ml = pyamg.smoothed_aggregation_solver(
-                A, B=self.near_nullspace, **self.amg_options
-            )
+            self._ml = deterministic_sa(A, self.near_nullspace, self.amg_options)
             self._M = self._ml.aspreconditioner(cycle="V")
         elif self.preconditioner == "jacobi":
             d = A.diagonal()
@@ -177,3 +184,22 @@ class KrylovSolver:
                 M=self._M, callback=tick, callback_type="pr_norm",
             )  # fmt: skip
         return x, count[0], time.perf_counter() - t0
+
+
+def deterministic_sa(A: sp.spmatrix, B: np.ndarray | None, options: dict[str, Any]) -> Any:
+    """pyamg smoothed aggregation with its random spectral-radius start vectors seeded.
+
+    pyamg draws those vectors from numpy's global generator; seeding it (and putting the caller's
+    state back) makes the hierarchy a function of the matrix alone, so equal operators give equal
+    iterates and a restored checkpoint repeats the original run bit for bit. pyamg also caches
+    spectral radii on the matrix (``A.rho``, ``A.rho_D_inv``) from earlier setups and cycles; it is dropped first.
+    """
+    for cached in ("rho", "rho_D_inv", "rho_block_D_inv"):  # pyamg's caches on the matrix
+        if hasattr(A, cached):
+            delattr(A, cached)
+    saved = np.random.get_state()  # noqa: NPY002 (pyamg draws from the legacy global state)
+    np.random.seed(20260101)  # noqa: NPY002
+    try:
+        return pyamg.smoothed_aggregation_solver(A, B=B, **options)
+    finally:
+        np.random.set_state(saved)  # noqa: NPY002

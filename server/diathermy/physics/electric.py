@@ -262,6 +262,20 @@ class DrivenPotential:
     def invalidate(self) -> None:
         self._unit = None
 
+    def cached_unit_field(
+        self,
+    ) -> tuple[ContactWeights, tuple[np.ndarray, np.ndarray, float]] | None:
+        """(contact, (V1, load1, R)) of the cached unit-current field, if any."""
+        if self._unit is None or self._contact is None:
+            return None
+        return self._contact, self._unit
+
+    def restore_unit_field(
+        self, contact: ContactWeights, unit: tuple[np.ndarray, np.ndarray, float]
+    ) -> None:
+        """Seed the cache (e.g. from a checkpoint); the conductivity must already be set."""
+        self._contact, self._unit = contact, unit
+
     def unit_field(
         self, sigma: np.ndarray | float, contact: ContactWeights
     ) -> tuple[np.ndarray, np.ndarray, float, PotentialStats]:

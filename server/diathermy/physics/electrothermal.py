@@ -32,6 +32,7 @@ import scipy.sparse.linalg as spla
 from diathermy.errors import SolverDivergedError
 from diathermy.fem.edges import EdgeStiffness, edge_stiffness
 from diathermy.fem.geometry import ElementGeometry
+from diathermy.fem.solvers import deterministic_sa
 from diathermy.mesh import TetMesh
 from diathermy.physics.electric import (
     POTENTIAL_AMG_OPTIONS,
@@ -272,7 +273,7 @@ class ElectroThermal:
         """One AMG V-cycle as a preconditioner, its hierarchy kept while A is the same object."""
         cached = self._block_amg.get(name)
         if cached is None or cached[0] is not A:
-            ml = pyamg.smoothed_aggregation_solver(A, **options)
+            ml = deterministic_sa(A, None, options)
             self._block_amg[name] = (A, ml)
         else:
             ml = cached[1]

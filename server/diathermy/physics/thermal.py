@@ -268,6 +268,9 @@ class HeatStepper:
         rtol: relative residual of each solve.
         monotone: False gives plain Crank-Nicolson (theta = 1/2 everywhere).
         preconditioner: "auto" picks Jacobi while its iteration bound stays <= jacobi_max_iterations.
+        amg_stale_factor: keep an AMG hierarchy of an older operator while it needs at most this
+            many times the iterations of a fresh one (0: always rebuild, which makes a restarted
+            run repeat the original bit for bit).
     """
 
     def __init__(
@@ -280,6 +283,7 @@ class HeatStepper:
         monotone: bool = True,
         preconditioner: HeatPreconditioner = "auto",
         jacobi_max_iterations: float = 60.0,
+        amg_stale_factor: float = 1.5,
     ) -> None:
         self.hmesh = hmesh
         self.robin = hmesh.robin(h_w_per_m2_k)
@@ -290,7 +294,9 @@ class HeatStepper:
         self.rtol = rtol
         self._solvers = {
             "jacobi": KrylovSolver("heat", rtol=rtol, preconditioner="jacobi"),
-            "amg": KrylovSolver("heat", rtol=rtol, preconditioner="amg", stale_factor=1.5),
+            "amg": KrylovSolver(
+                "heat", rtol=rtol, preconditioner="amg", stale_factor=amg_stale_factor
+            ),
         }
         self._key: tuple[float, np.ndarray, np.ndarray] | None = None
         self._op: HeatOperator | None = None

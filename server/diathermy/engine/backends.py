@@ -1,0 +1,118 @@
+"""Mechanics backends behind one interface: full FEM here; the CNN and PGD surrogates plug in."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from diathermy.fem.elastic import ElasticAssembler
+from diathermy.mesh import TetMesh
+from diathermy.physics.mechanics import MechanicsSolver, mechanics_assembler
+
+
+@dataclass(frozen=True)
+class MechanicsOutput:
+    """A backend's answer: nodal displacement (n_nodes, 3) in m, plus what it cost."""
+
+    u: np.ndarray
+    iterations: int = 0
+    residual: float = 0.0
+    rebuilt: bool = False
+    loose_tets: np.ndarray | None = None  # tets a solver decided to remove (loose fragments)
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+class MechanicsBackend(Protocol):
+    """Solves the mechanics of one step: (pressure, level set, topology) -> displacement."""
+
+    name: str
+
+    def solve(
+        self,
+        *,
+        pressure_pa: np.ndarray,
+        level_set_m: np.ndarray,
+        youngs_modulus_pa: np.ndarray,
+        healthy: np.ndarray,
+        warm_start: np.ndarray | None,
+    ) -> MechanicsOutput: ...
+
+
+class FEMBackend:
+    """The high-fidelity elastostatic FEM solve; the operator is rebuilt only when E changes."""
+
+    name = "fem"
+
+    def __init__(
+        self, mesh: TetMesh, *, poisson_ratio: float, p0_pa: float, rtol: float, ersatz_ratio: float
+    ) -> None:
+        self.mesh = mesh
+        self.poisson_ratio = poisson_ratio
+        self.p0_pa = p0_pa
+        self.rtol = rtol
+        self.ersatz_ratio = ersatz_ratio
+        self._assembler: ElasticAssembler | None = None
+        self._solver: MechanicsSolver | None = None
+        self._E: np.ndarray | None = None
+        self.n_builds = 0
+        self.n_solves = 0
+
+    @property
+    def solver(self) -> MechanicsSolver | None:
+        return self._solver
+
+    def operator_for(
+        self, youngs_modulus_pa: np.ndarray, healthy: np.ndarray
+    ) -> tuple[MechanicsSolver, bool]:
+        """The solver of this topology, rebuilt only if E changed; (solver, rebuilt)."""
+        if (
+            self._solver is not None
+            and self._E is not None
+            and np.array_equal(self._E, youngs_modulus_pa)
+        ):
+            return self._solver, False
+        if self._assembler is None:
+            self._assembler = mechanics_assembler(self.mesh)
+        self._solver = MechanicsSolver(
+            self.mesh,
+            youngs_modulus_pa,
+            self.poisson_ratio,
+            healthy=healthy,
+            ersatz_ratio=self.ersatz_ratio,
+            rtol=self.rtol,
+            assembler=self._assembler,
+        )
+        self._E = youngs_modulus_pa.copy()
+        self.n_builds += 1
+        return self._solver, True
+
+    def solve(
+        self,
+        *,
+        pressure_pa: np.ndarray,
+        level_set_m: np.ndarray,
+        youngs_modulus_pa: np.ndarray,
+        healthy: np.ndarray,
+        warm_start: np.ndarray | None,
+    ) -> MechanicsOutput:
+        t0 = time.perf_counter()
+        solver, rebuilt = self.operator_for(youngs_modulus_pa, healthy)
+        build_s = time.perf_counter() - t0
+        res = solver.solve(pressure_pa, self.p0_pa, x0=warm_start)
+        self.n_solves += 1
+        loose = solver.fragments.loose
+        return MechanicsOutput(
+            u=res.u,
+            iterations=res.stats.iterations,
+            residual=res.stats.residual,
+            rebuilt=rebuilt,
+            loose_tets=loose if loose.any() else None,
+            extra={
+                "operator_s": build_s,
+                "amg_setup_s": res.stats.amg_setup_s,
+                "solve_s": res.stats.solve_s,
+            },
+        )

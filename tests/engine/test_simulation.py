@@ -1,0 +1,162 @@
+"""The engine runs only the effects a scene calls for, skips provably idle work, keeps energy,
+and restores from a checkpoint bit for bit."""
+
+from __future__ import annotations
+
+import h5py
+import numpy as np
+import pytest
+
+from diathermy.engine.simulation import Simulation
+from diathermy.errors import CheckpointError, SceneError
+from diathermy.scene import Electrode
+
+from .scenes import tiny_scene
+
+SOLVER_EFFECTS = ("electric", "thermal", "vaporization", "mechanics", "dissection")
+
+
+@pytest.mark.parametrize(
+    "effects",
+    [
+        ["electric"],
+        ["electric", "thermal"],
+        ["electric", "vaporization"],
+        ["electric", "mechanics"],
+        ["electric", "dissection"],
+    ],
+)
+def test_effects_not_called_for_never_run(effects):
+    sim = Simulation(tiny_scene(effects=effects))
+    sim.run(20)
+    closed = sim.effects
+    for effect in SOLVER_EFFECTS:
+        if effect not in closed:
+            assert sim.calls[effect] == 0, effect
+            assert effect not in sim.last_report.effects
+    assert sim.calls["electric"] >= 1
+    if "dissection" in closed:
+        assert sim.calls["dissection"] > 0 and sim.last_report.cut_volume_m3 > 0
+
+
+def test_idle_work_is_skipped_with_a_reason():
+    sim = Simulation(tiny_scene(electrodes=[Electrode(position_m=(0.01, 0.005), power_w=0.0)]))
+    reports = sim.run(100)
+    for effect in ("electric", "vaporization", "mechanics", "dissection"):
+        assert sim.calls[effect] == 0, effect
+    rep = reports[-1]
+    assert "no active electrode" in rep.effects["electric"].reason
+    assert "saturation" in rep.effects["vaporization"].reason
+    assert "p0" in rep.effects["mechanics"].reason
+    assert "kappa" in rep.effects["dissection"].reason
+    # zero power for 100 steps: nothing but cooling towards ambient changes
+    t = sim.tissue
+    assert np.all(sim.state["pressure"] == t.p_atm_pa)
+    assert not sim.state["displacement"].any() and not sim.state["removed"].any()
+    assert np.array_equal(sim.state["level_set"], Simulation(sim.scene).state["level_set"])
+    T = sim.state["temperature"]
+    assert T.min() >= t.t_ambient_k - 1e-9 and T.max() <= t.t_initial_k + 1e-9
+
+
+def test_fixed_electrode_reuses_potential_until_the_cut():
+    sim = Simulation(tiny_scene(effects=["electric", "thermal"]))
+    sim.run(10)
+    assert sim.calls["electric"] == 10
+    assert sim.potential.solver.krylov.n_solves == 1  # one unit-current solve, reused 9 times
+    assert "reused" in sim.last_report.effects["electric"].reason
+
+
+def test_coagulation_matches_full_scene_until_first_vaporization():
+    full = Simulation(tiny_scene())
+    coag = Simulation(tiny_scene(effects=["electric", "thermal"]))
+    for _ in range(30):
+        rf = full.step()
+        if rf.effects["vaporization"].ran:
+            break
+        coag.step()
+        assert np.array_equal(full.state["temperature"], coag.state["temperature"])
+    else:
+        pytest.fail("the tiny scene never vaporised")
+    assert full.step_index > 2
+
+
+def test_energy_balance_of_a_heated_run_closes():
+    sim = Simulation(tiny_scene(effects=["electric", "vaporization"]))
+    reports = sim.run(40)
+    e = reports[-1].energy
+    assert e["latent_stored"] > 0  # water did boil
+    assert abs(e["imbalance"]) <= 1e-3 * e["joule_in"]
+    stored = e["sensible_stored"] + e["latent_stored"]
+    assert stored == pytest.approx(e["joule_in"] - e["convective_out"], rel=1e-6)
+
+
+def test_cut_happens_and_electrode_follows_crater():
+    sim = Simulation(tiny_scene())
+    reports = sim.run(40)
+    cut = [r.cut_volume_m3 for r in reports]
+    assert cut[-1] > 0 and all(b >= a for a, b in zip(cut, cut[1:], strict=False))  # irreversible
+    depth = reports[-1].crater_depth_m
+    assert 0 < depth < 0.01
+    (key,) = sim._contacts
+    assert key[2] < sim.top_z  # the contact disk sits on the crater floor, not the old top
+
+
+def test_checkpoint_restore_continues_bit_for_bit(tmp_path):
+    sim = Simulation(tiny_scene())
+    sim.run(18)  # past boiling and into the cut
+    sim.set_electrode("active", power_w=25.0)
+    path = sim.save_checkpoint(tmp_path / "c.h5")
+    sim.run(8)
+    back = Simulation.load_checkpoint(path)
+    assert back.step_index == 18 and back.time_s == pytest.approx(18 * 0.03)
+    back.run(8)
+    for name, arr in sim.state.arrays.items():
+        assert np.array_equal(arr, back.state.arrays[name]), name
+    assert sim.state.energy_j == back.state.energy_j
+
+
+def test_bad_checkpoints_get_clear_errors(tmp_path):
+    junk = tmp_path / "junk.h5"
+    junk.write_bytes(b"\x89HDF not really")
+    with pytest.raises(CheckpointError, match="not a readable HDF5"):
+        Simulation.load_checkpoint(junk)
+    with h5py.File(tmp_path / "foreign.h5", "w") as f:
+        f["x"] = 1
+    with pytest.raises(CheckpointError, match="not a diathermy checkpoint"):
+        Simulation.load_checkpoint(tmp_path / "foreign.h5")
+    good = Simulation(tiny_scene(effects=["thermal"])).save_checkpoint(tmp_path / "g.h5")
+    with h5py.File(good, "a") as f:
+        del f["state/temperature"]
+        f["state/temperature"] = np.zeros(3)
+    with pytest.raises(CheckpointError, match="do not match"):
+        Simulation.load_checkpoint(good)
+    with h5py.File(good, "a") as f:
+        del f.attrs["scene"]
+    with pytest.raises(CheckpointError, match="incomplete or corrupt"):
+        Simulation.load_checkpoint(good)
+
+
+def test_set_electrode_validates():
+    sim = Simulation(tiny_scene(effects=["electric"]))
+    with pytest.raises(SceneError, match="unknown electrode"):
+        sim.set_electrode("nope", power_w=1.0)
+    with pytest.raises(SceneError, match="position_m"):
+        sim.set_electrode("active", position_m=(1.0, 0.0))
+    with pytest.raises(SceneError, match="power_w"):
+        sim.set_electrode("active", power_w=float("nan"))
+    sim.set_electrode("active", power_w=12.0)
+    assert sim.step().delivered_power_w == pytest.approx(12.0, rel=1e-9)
+    sim.set_electrode("active", active=False)
+    assert sim.step().delivered_power_w == 0.0
+
+
+def test_fields_and_surface():
+    sim = Simulation(tiny_scene())
+    sim.run(20)
+    assert sim.field("temperature").shape == (9, 9, 17)
+    assert sim.field("displacement").shape == (9, 9, 17, 3)
+    assert sim.field("strain_energy").shape == (sim.disc.n_tets,)
+    with pytest.raises(SceneError, match="unknown field"):
+        sim.field("bogus")
+    verts, faces = sim.cut_surface()
+    assert verts.shape[1] == 3 and faces.shape[1] == 3 and faces.shape[0] > 0

@@ -1,0 +1,88 @@
+"""The command line: simulate writes the documented run file; user errors are one line, exit 2."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+from diathermy.cli import main
+from diathermy.engine.runfile import read_run
+
+
+def test_simulate_writes_run_file_and_vtu(tmp_path, capsys):
+    scene = tmp_path / "s.json"
+    scene.write_text(
+        json.dumps(
+            {"name": "cli", "grid": [5, 5, 9], "steps": 4, "effects": ["electric", "thermal"]}
+        )
+    )
+    out = tmp_path / "run.h5"
+    assert (
+        main(["simulate", str(scene), "--out", str(out), "--vtu", str(tmp_path / "vtu"), "--quiet"])
+        == 0
+    )
+    run = read_run(out)
+    assert run["fields"]["temperature"].shape == (4, 5, 5, 9)
+    assert run["fields"]["potential"].shape == (4, 5, 5, 9)
+    assert run["cell_fields"]["joule_heat"].shape[0] == 4
+    assert [r["step"] for r in run["reports"]] == [1, 2, 3, 4]
+    assert run["reports"][0]["effects"]["electric"]["ran"]
+    assert (tmp_path / "vtu" / "cli.pvd").exists() and (
+        tmp_path / "vtu" / "step_00004.vtu"
+    ).exists()
+    assert "4 steps" in capsys.readouterr().out
+
+
+def test_grid_override_and_every(tmp_path):
+    out = tmp_path / "r.h5"
+    assert (
+        main(
+            [
+                "simulate",
+                "coagulation",
+                "--grid",
+                "5x5x9",
+                "--steps",
+                "4",
+                "--every",
+                "2",
+                "--out",
+                str(out),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
+    run = read_run(out)
+    assert list(run["step"]) == [2, 4] and "thermal_damage" in run["fields"]
+
+
+def test_user_errors_are_one_line(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("grid: [2, 2, 2]\n")
+    for args in (
+        ["simulate", "no-such-scene"],
+        ["simulate", str(bad)],
+        ["simulate", str(tmp_path / "missing.json")],
+    ):
+        proc = subprocess.run(
+            [sys.executable, "-m", "diathermy", *args], capture_output=True, text=True
+        )
+        assert proc.returncode == 2, proc.stderr
+        lines = proc.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("diathermy: error:"), proc.stderr
+    proc = subprocess.run(
+        [sys.executable, "-m", "diathermy", "simulate", "--grid", "3x3"],
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+
+
+def test_scenes_and_schema(capsys):
+    assert main(["scenes"]) == 0
+    listing = capsys.readouterr().out
+    assert "fixed-electrode" in listing and "moving-electrode" in listing
+    assert main(["schema"]) == 0
+    assert "electrodes" in json.loads(capsys.readouterr().out)["properties"]
