@@ -136,6 +136,10 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("schema", help="print the scene JSON Schema")
     s.add_argument("--out", help="write to this file instead of stdout")
     s.set_defaults(func=_cmd_schema)
+
+    from diathermy.service.cli import add_serve_parser  # FastAPI itself loads only when serving
+
+    add_serve_parser(sub)
     return p
 
 
