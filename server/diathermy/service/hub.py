@@ -58,7 +58,10 @@ class Frame:
 
 
 class FrameSlot:
-    """A one-frame mailbox filled from any thread and emptied by one asyncio task."""
+    """A one-frame mailbox filled from any thread and emptied by one asyncio task.
+
+    ``wake`` (event-loop thread only) lets the owner wake its sender for other messages too.
+    """
 
     def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
         self._loop = loop
@@ -77,13 +80,21 @@ class FrameSlot:
         self._loop.call_soon_threadsafe(self._event.set)
         return replaced
 
+    def wake(self) -> None:
+        self._event.set()
+
+    async def wait(self) -> Frame | None:
+        """Wait for a put or a wake; take the newest frame if there is one."""
+        await self._event.wait()
+        with self._lock:
+            self._event.clear()
+            frame, self._frame = self._frame, None
+        return frame
+
     async def get(self) -> Frame:
         """Wait for and take the newest frame."""
         while True:
-            await self._event.wait()
-            with self._lock:
-                self._event.clear()
-                frame, self._frame = self._frame, None
+            frame = await self.wait()
             if frame is not None:
                 return frame
 

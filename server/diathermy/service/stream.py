@@ -14,6 +14,7 @@ import contextlib
 import json
 import logging
 import time
+from collections import deque
 from collections.abc import Awaitable, Callable
 from typing import Any
 
@@ -45,6 +46,7 @@ CLOSE_BAD_MESSAGE = 4400
 CLOSE_UNAUTHORIZED = 4401
 CLOSE_NOT_FOUND = 4404
 CLOSE_TOO_BIG = 1009
+MAX_PENDING_REPLIES = 64
 
 Notify = Callable[[dict[str, Any]], Awaitable[None]]
 
@@ -179,18 +181,26 @@ class StreamConnection:
         self.rec = rec
         self.state = state
         self.sub = Subscriber(slot=FrameSlot(asyncio.get_running_loop()))
-        self._send_lock = asyncio.Lock()
+        self.replies: deque[dict[str, Any]] = deque()
+        self._sender_task: asyncio.Task[None] | None = None
 
     async def send(self, msg: dict[str, Any]) -> None:
-        async with self._send_lock:
-            await self.ws.send_bytes(pack(msg))
+        """Queue a reply (hello, ack, error) for the sender; never waits on a slow socket."""
+        if len(self.replies) >= MAX_PENDING_REPLIES:
+            raise BadRequestError("client sends control messages faster than it reads replies")
+        self.replies.append(msg)
+        self.sub.slot.wake()
 
     async def _sender(self) -> None:
+        """The only writer of the socket: replies first, then the newest frame."""
         while True:
-            frame = await self.sub.slot.get()
-            msg = {**frame.header, "dropped": self.sub.slot.dropped, **frame.payload}
-            await self.send(msg)
-            self.state.metrics.frames_sent.inc()
+            frame = await self.sub.slot.wait()
+            while self.replies:
+                await self.ws.send_bytes(pack(self.replies.popleft()))
+            if frame is not None:
+                msg = {**frame.header, "dropped": self.sub.slot.dropped, **frame.payload}
+                await self.ws.send_bytes(pack(msg))
+                self.state.metrics.frames_sent.inc()
 
     async def serve(self) -> None:
         driver = driver_of(self.rec, self.state)
@@ -198,15 +208,22 @@ class StreamConnection:
         await self.send(hello)
         driver.attach(self.sub, self.send)
         self.state.metrics.stream_clients.inc()
-        sender = asyncio.create_task(self._sender())
+        sender = self._sender_task = asyncio.create_task(self._sender())
         try:
             await self._receive_loop(driver)
+            await self._flush(sender)
         finally:
             sender.cancel()
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await sender
             self.state.metrics.stream_clients.dec()
             await driver.detach(self.sub)
+
+    async def _flush(self, sender: asyncio.Task[None], timeout_s: float = 2.0) -> None:
+        """Give the sender a moment to deliver queued replies (e.g. the error before a close)."""
+        deadline = time.monotonic() + timeout_s
+        while self.replies and not sender.done() and time.monotonic() < deadline:
+            await asyncio.sleep(0.005)
 
     def _hello(self, sim: Any) -> dict[str, Any]:
         return {
@@ -248,6 +265,9 @@ class StreamConnection:
     async def _close(self, code: int, error: str, message: str, field: str | None = None) -> None:
         with contextlib.suppress(Exception):
             await self.send({"type": "error", "error": error, "message": message, "field": field})
+        if self._sender_task is not None:
+            await self._flush(self._sender_task)
+            self._sender_task.cancel()
         if self.ws.client_state != WebSocketState.DISCONNECTED:
             with contextlib.suppress(Exception):
                 await self.ws.close(code=code, reason=close_reason(error, message, field))
