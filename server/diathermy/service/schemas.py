@@ -16,6 +16,11 @@ class _In(BaseModel):
 class SessionCreate(_In):
     """A new session from an inline scene or a built-in scene name, optionally on another grid."""
 
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={"examples": [{"builtin": "default", "grid": [5, 5, 9]}]},
+    )
+
     scene: Scene | None = Field(None, description="an inline scene")
     builtin: str | None = Field(None, description="a built-in scene name, e.g. 'default'")
     grid: tuple[int, int, int] | None = Field(
@@ -65,6 +70,8 @@ class SessionList(BaseModel):
 
 
 class StepRequest(_In):
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"n": 2}]})
+
     n: int = Field(1, ge=1, description="steps to take (bounded by the server's limit)")
 
 

@@ -27,7 +27,9 @@ _BINARY = {
 }
 
 
-@router.get("/{session_id}/fields", response_class=Response, responses=_BINARY)
+@router.get(
+    "/{session_id}/fields", response_class=Response, responses=_BINARY, operation_id="read_fields"
+)
 async def read_fields(
     rec: SessionDep,
     state: StateDep,
@@ -55,6 +57,7 @@ async def read_fields(
 
 @router.get(
     "/{session_id}/surface",
+    operation_id="read_surface",
     response_model=SurfacePublic,
     responses={200: {"content": {"application/msgpack": {}}}},
 )
@@ -78,6 +81,7 @@ async def read_surface(
 
 @router.get(
     "/{session_id}/vtu",
+    operation_id="read_vtu",
     response_class=Response,
     responses={200: {"content": {"application/vnd.paraview.vtu": {}}}},
 )

@@ -21,10 +21,31 @@ from diathermy.service.schemas import (
     StepResult,
 )
 
+SESSION_LINKS = {
+    op: {"operationId": op, "parameters": {"session_id": "$response.body#/id"}}
+    for op in (
+        "get_session",
+        "step_session",
+        "take_snapshot",
+        "list_snapshots",
+        "read_fields",
+        "read_surface",
+        "read_vtu",
+        "delete_session",
+    )
+}
+"""OpenAPI links from a created session to what can be done with it (used by fuzzers)."""
+
 router = APIRouter(prefix="/v1/sessions", tags=["sessions"], responses=ErrorResponses)
 
 
-@router.post("", status_code=201, response_model=SessionPublic)
+@router.post(
+    "",
+    status_code=201,
+    response_model=SessionPublic,
+    operation_id="create_session",
+    responses={201: {"links": SESSION_LINKS}},
+)
 async def create_session(body: SessionCreate, state: StateDep, owner: OwnerDep) -> Any:
     """Build a simulation from a scene (inline or built-in); 201 with its grid, effects, DOFs."""
     rec = await svc.create_session(
@@ -37,26 +58,26 @@ async def create_session(body: SessionCreate, state: StateDep, owner: OwnerDep) 
     return svc.session_public(rec)
 
 
-@router.get("", response_model=SessionList)
+@router.get("", response_model=SessionList, operation_id="list_sessions")
 async def list_sessions(state: StateDep, owner: OwnerDep) -> Any:
     """The caller's sessions."""
     return SessionList(sessions=[svc.session_public(r) for r in state.registry.owned(owner)])
 
 
-@router.get("/{session_id}", response_model=SessionPublic)
+@router.get("/{session_id}", response_model=SessionPublic, operation_id="get_session")
 async def get_session(rec: SessionDep) -> Any:
     """One session: step, time, grid, the last step report."""
     return svc.session_public(rec)
 
 
-@router.delete("/{session_id}", status_code=204)
+@router.delete("/{session_id}", status_code=204, operation_id="delete_session")
 async def delete_session(rec: SessionDep, state: StateDep) -> Response:
     """Stop and delete a session and its files."""
     await svc.delete_session(registry=state.registry, metrics=state.metrics, rec=rec)
     return Response(status_code=204)
 
 
-@router.post("/{session_id}/step", response_model=StepResult)
+@router.post("/{session_id}/step", response_model=StepResult, operation_id="step_session")
 async def step_session(rec: SessionDep, state: StateDep, body: StepRequest | None = None) -> Any:
     """Take n steps (409 if the session is already stepping); returns their reports."""
     n = body.n if body is not None else 1
@@ -70,7 +91,9 @@ async def step_session(rec: SessionDep, state: StateDep, body: StepRequest | Non
     )
 
 
-@router.patch("/{session_id}/electrodes/{name}", response_model=ElectrodeAck)
+@router.patch(
+    "/{session_id}/electrodes/{name}", response_model=ElectrodeAck, operation_id="update_electrode"
+)
 async def update_electrode(
     rec: SessionDep,
     state: StateDep,
@@ -84,19 +107,30 @@ async def update_electrode(
     return ElectrodeAck(name=name, control_id=control_id)
 
 
-@router.post("/{session_id}/snapshots", status_code=201, response_model=SnapshotPublic)
+@router.post(
+    "/{session_id}/snapshots",
+    status_code=201,
+    response_model=SnapshotPublic,
+    operation_id="take_snapshot",
+)
 async def take_snapshot(rec: SessionDep, state: StateDep) -> Any:
     """Save the current state under a new snapshot id."""
     return await svc.take_snapshot(registry=state.registry, rec=rec)
 
 
-@router.get("/{session_id}/snapshots", response_model=list[SnapshotPublic])
+@router.get(
+    "/{session_id}/snapshots", response_model=list[SnapshotPublic], operation_id="list_snapshots"
+)
 async def list_snapshots(rec: SessionDep) -> Any:
     """The session's snapshots, oldest first."""
     return [SnapshotPublic(**s) for s in rec.meta.get("snapshots", [])]
 
 
-@router.post("/{session_id}/snapshots/{snapshot_id}/restore", response_model=SessionPublic)
+@router.post(
+    "/{session_id}/snapshots/{snapshot_id}/restore",
+    response_model=SessionPublic,
+    operation_id="restore_snapshot",
+)
 async def restore_snapshot(
     rec: SessionDep,
     state: StateDep,
