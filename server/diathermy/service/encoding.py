@@ -13,10 +13,14 @@ WireDtype = Literal["float16", "float32"]
 
 
 def encode_array(a: np.ndarray, dtype: str | None = None) -> dict[str, Any]:
-    """``{"shape", "dtype", "data"}``: C-order little-endian bytes; floats cast to ``dtype``."""
+    """``{"shape", "dtype", "data"}``: C-order little-endian bytes; floats cast to ``dtype``.
+
+    Values beyond the range of ``dtype`` become +-inf (float16 tops out at 65504).
+    """
     a = np.asarray(a)
     if dtype is not None and a.dtype.kind == "f":
-        a = a.astype(dtype)
+        with np.errstate(over="ignore"):  # beyond float16's range is +-inf, as IEEE says
+            a = a.astype(dtype)
     a = np.ascontiguousarray(a, dtype=a.dtype.newbyteorder("<"))
     return {"shape": list(a.shape), "dtype": a.dtype.str, "data": a.tobytes()}
 

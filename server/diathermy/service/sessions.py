@@ -175,7 +175,8 @@ async def read_fields(
     def read(sim: Any) -> tuple[int, float, dict[str, np.ndarray]]:
         names = parse_field_names(fields, list(sim.field_names()))
         arrays = {n: np.asarray(sim.field(n)) for n in names}
-        arrays = {n: a.astype(dtype) if a.dtype.kind == "f" else a for n, a in arrays.items()}
+        with np.errstate(over="ignore"):
+            arrays = {n: a.astype(dtype) if a.dtype.kind == "f" else a for n, a in arrays.items()}
         return int(sim.step_index), float(sim.time_s), arrays
 
     return await run_locked(rec, registry, read)
