@@ -42,7 +42,7 @@ def unpack(data: bytes) -> Any:
 def npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
     """A compressed .npz of named arrays."""
     buf = io.BytesIO()
-    np.savez_compressed(buf, **arrays)
+    np.savez_compressed(buf, **arrays)  # type: ignore[arg-type]
     return buf.getvalue()
 
 

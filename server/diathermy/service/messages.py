@@ -62,7 +62,7 @@ class Step(_Msg):
 ClientMessage = Annotated[
     Subscribe | ElectrodeControl | Run | Pause | Step, Field(discriminator="type")
 ]
-client_message = TypeAdapter(ClientMessage)
+client_message: TypeAdapter[Any] = TypeAdapter(ClientMessage)
 
 
 class WireArray(BaseModel):

@@ -157,13 +157,14 @@ class SessionRegistry:
 
     def snapshot(self, rec: SessionRecord) -> dict[str, Any]:
         """Write a named snapshot of the current state (engine thread, under the session lock)."""
-        snap = {
-            "id": uuid.uuid4().hex[:12],
+        snap_id = uuid.uuid4().hex[:12]
+        snap: dict[str, Any] = {
+            "id": snap_id,
             "step": int(rec.sim.step_index),
             "time_s": float(rec.sim.time_s),
             "created_at": time.time(),
         }
-        rec.sim.save_checkpoint(rec.snapshot_path(snap["id"]))
+        rec.sim.save_checkpoint(rec.snapshot_path(snap_id))
         rec.meta.setdefault("snapshots", []).append(snap)
         rec.write_meta()
         return snap

@@ -247,6 +247,6 @@ async def save_dirty(*, registry: SessionRegistry, wait: bool) -> int:
             continue
         async with rec.lock:
             if rec.id in registry.sessions:
-                await anyio.to_thread.run_sync(lambda r=rec: registry.save(r))
+                await anyio.to_thread.run_sync(registry.save, rec)
                 saved += 1
     return saved

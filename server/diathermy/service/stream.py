@@ -15,7 +15,7 @@ import json
 import logging
 import time
 from collections import deque
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Mapping
 from typing import Any
 
 from pydantic import ValidationError
@@ -143,7 +143,7 @@ def driver_of(rec: SessionRecord, state: AppState) -> SessionDriver:
     return rec.driver
 
 
-def parse_message(raw: dict[str, Any]) -> Any:
+def parse_message(raw: Mapping[str, Any]) -> Any:
     """A client message from a websocket.receive event; raises BadRequestError naming the field."""
     try:
         if raw.get("text") is not None:

@@ -15,7 +15,7 @@ from diathermy.service.schemas import FieldDtype, FieldFormat, SurfacePublic
 
 router = APIRouter(prefix="/v1/sessions", tags=["fields"], responses=ErrorResponses)
 
-_BINARY = {
+_BINARY: dict[int | str, dict[str, Any]] = {
     200: {
         "content": {
             "application/msgpack": {"schema": {"type": "string", "format": "binary"}},
