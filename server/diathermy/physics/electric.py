@@ -1,0 +1,298 @@
+"""Quasi-static electric potential, Joule heat and the electrode drive (PHYSICS.md sections 1-2).
+
+div(sigma grad V) = 0 with V = 0 on the bottom (z-), -sigma dV/dn = j on the electrode's contact
+disk and insulated elsewhere. The contact load is a quadrature of the disk itself, so the
+injected current is j * area at every resolution, also when the disk is smaller than a cell.
+
+Dirichlet nodes are eliminated (the solve runs on the free nodes only), so the matrix stays SPD;
+it is assembled from edge weights (7-point stencil on the Kuhn mesh) once per conductivity and
+solved by AMG-preconditioned CG with hierarchy reuse and warm starts.
+
+Solver tolerance: the default rtol 1e-10 (relative residual) makes the discrete energy identity
+sum_e q_e |T_e| = int j V hold to ~1e-9 relative; at 1e-8 it holds to ~1e-7 only.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+
+from diathermy.errors import SceneError
+from diathermy.fem.edges import EdgeStiffness, LaplacianPattern, laplacian_pattern
+from diathermy.fem.solvers import KrylovSolver, SolveStats
+from diathermy.mesh import TetMesh
+
+POTENTIAL_AMG_OPTIONS: dict[str, Any] = {
+    "presmoother": ("chebyshev", {"degree": 2}),
+    "postsmoother": ("chebyshev", {"degree": 2}),
+    "improve_candidates": None,
+}
+"""pyamg options for the potential: Chebyshev smoothing, no candidate improvement (measured
+fastest setup + solve at 64x64x128, see benchmarks/results/electrothermal.md)."""
+
+
+@dataclass(frozen=True)
+class ContactWeights:
+    """The electrode's contact disk as a nodal load per unit current density.
+
+    Attributes:
+        weights: int over the disk of each shape function (n_nodes,) in m^2.
+        area_m2: disk area inside the block (= weights.sum()), in m^2.
+    """
+
+    weights: np.ndarray
+    area_m2: float
+
+
+def disk_quadrature(
+    center_m: np.ndarray, radius_m: float, n_radial: int, n_angular: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Points (n, 3) and weights (n,) in m^2 of a horizontal disk; weights sum to pi a^2.
+
+    Gauss-Legendre in r (exact for the r dr measure) times equispaced angles.
+    """
+    s, ws = np.polynomial.legendre.leggauss(n_radial)
+    r = 0.5 * radius_m * (s + 1.0)
+    wr = 0.5 * radius_m * ws * r  # int_0^a f(r) r dr
+    phi = (np.arange(n_angular) + 0.5) * (2.0 * np.pi / n_angular)
+    rr, pp = np.meshgrid(r, phi, indexing="ij")
+    pts = np.column_stack(
+        [
+            center_m[0] + (rr * np.cos(pp)).ravel(),
+            center_m[1] + (rr * np.sin(pp)).ravel(),
+            np.full(rr.size, center_m[2]),
+        ]
+    )
+    w = np.repeat(wr * (2.0 * np.pi / n_angular), n_angular)
+    return pts, w
+
+
+def contact_weights(
+    mesh: TetMesh,
+    center_m: tuple[float, float, float] | np.ndarray,
+    radius_m: float,
+    *,
+    n_radial: int = 16,
+    n_angular: int = 64,
+) -> ContactWeights:
+    """Nodal weights of a contact disk of radius a centred at center_m = (x, y, z), in m.
+
+    Quadrature points outside the block are dropped (an electrode over an edge loses that part
+    of its area); the others are spread over their tet's vertices by barycentric coordinates.
+    """
+    center = np.asarray(center_m, dtype=float)
+    if center.shape != (3,) or not np.all(np.isfinite(center)):
+        raise SceneError(f"electrode centre must be 3 finite coordinates in m, got {center_m}")
+    if not radius_m > 0:
+        raise SceneError(f"electrode contact radius must be positive, got {radius_m}")
+    pts, w = disk_quadrature(center, radius_m, n_radial, n_angular)
+    inside = mesh.grid.contains(pts)
+    pts, w = pts[inside], w[inside]
+    if w.size == 0:
+        raise SceneError(f"electrode contact disk at {center.tolist()} lies outside the block")
+    tet, lam = mesh.locate(pts)
+    weights = np.bincount(
+        mesh.tets[tet].ravel(), (lam * w[:, None]).ravel(), minlength=mesh.n_nodes
+    )
+    return ContactWeights(weights=weights, area_m2=float(weights.sum()))
+
+
+def joule_heat(grads: np.ndarray, tets: np.ndarray, sigma: np.ndarray, V: np.ndarray) -> np.ndarray:
+    """Joule heat q = sigma |grad V|^2 per tet (n_tets,) in W/m^3.
+
+    grads: shape-function gradients (n_tets, 4, 3); sigma (n_tets,) in S/m; V (n_nodes,) in V.
+    """
+    g = np.einsum("ea,eak->ek", V[tets], grads)
+    return sigma * np.einsum("ek,ek->e", g, g)
+
+
+def delivered_power(load: np.ndarray, V: np.ndarray) -> float:
+    """Electrical power int j V over the contact in W: nodal current load (n_nodes,) in A . V."""
+    return float(np.dot(load, V))
+
+
+@dataclass(frozen=True)
+class ElectrodeDrive:
+    """How the generator drives the electrode: a fixed current density or a fixed power."""
+
+    mode: Literal["current_density", "power"] = "current_density"
+    current_density_a_per_m2: float = 5.72e4
+    power_w: float = 50.0
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("current_density", "power"):
+            raise SceneError(f"electrode drive mode must be current_density or power: {self.mode}")
+        if not self.current_density_a_per_m2 >= 0 or not self.power_w >= 0:
+            raise SceneError("electrode current density and power must be non-negative")
+
+
+@dataclass(frozen=True)
+class PotentialStats:
+    """One potential solve: Krylov stats, assembly time, and whether a cached field was reused."""
+
+    iterations: int
+    residual: float
+    assembly_s: float
+    setup_s: float
+    solve_s: float
+    reassembled: bool
+    cached: bool
+
+
+class PotentialSolver:
+    """-div(sigma grad V) = load on the free nodes, V given on ``dirichlet_nodes``.
+
+    The operator is assembled once per conductivity (``set_conductivity`` compares with the
+    last one); the AMG hierarchy and the last solution (a warm start) are kept between solves.
+
+    Args:
+        mesh: the tet mesh.
+        stiffness: its edge couplings (``diathermy.fem.edges.edge_stiffness``).
+        dirichlet_nodes: nodes with prescribed V (default: the bottom side z-).
+        rtol: relative residual of the CG solve.
+    """
+
+    def __init__(
+        self,
+        mesh: TetMesh,
+        stiffness: EdgeStiffness,
+        *,
+        dirichlet_nodes: np.ndarray | None = None,
+        rtol: float = 1e-10,
+        amg_options: dict[str, Any] | None = None,
+    ) -> None:
+        fixed = mesh.side_nodes("z-") if dirichlet_nodes is None else np.unique(dirichlet_nodes)
+        free = np.setdiff1d(np.arange(mesh.n_nodes), fixed)
+        self.stiffness = stiffness
+        self.n_tets = mesh.n_tets
+        self.fixed = fixed
+        self.pattern: LaplacianPattern = laplacian_pattern(stiffness, free)
+        opts = POTENTIAL_AMG_OPTIONS if amg_options is None else amg_options
+        self.krylov = KrylovSolver("potential", rtol=rtol, amg_options=opts)
+        self.sigma: np.ndarray | None = None
+        self.weights: np.ndarray | None = None
+        self._pending_assembly_s = 0.0
+
+    @property
+    def free(self) -> np.ndarray:
+        return self.pattern.nodes
+
+    def set_conductivity(self, sigma: np.ndarray | float) -> bool:
+        """Use conductivity sigma (n_tets,) in S/m; reassembles only if it changed. True if it did."""
+        sigma = np.broadcast_to(np.asarray(sigma, dtype=float), (self.n_tets,))
+        if self.sigma is not None and np.array_equal(self.sigma, sigma):
+            return False
+        if not np.all(sigma > 0) or not np.all(np.isfinite(sigma)):
+            raise SceneError("conductivity must be positive and finite in every tet")
+        t0 = time.perf_counter()
+        self.sigma = sigma.copy()
+        self.weights = self.stiffness.weights(sigma)
+        self.krylov.set_operator(self.pattern.matrix(self.stiffness, self.weights))
+        self._pending_assembly_s += time.perf_counter() - t0
+        return True
+
+    def solve(
+        self, load: np.ndarray, dirichlet_values: np.ndarray | None = None
+    ) -> tuple[np.ndarray, PotentialStats]:
+        """V (n_nodes,) for a nodal load (n_nodes,) in A; dirichlet_values (n_fixed,) default 0."""
+        if self.weights is None:
+            raise SceneError("potential: set_conductivity before solve")
+        V = np.zeros(self.stiffness.n_nodes)
+        b = load[self.free].astype(float, copy=True)
+        if dirichlet_values is not None:
+            V[self.fixed] = dirichlet_values
+            b -= self._lift(V)
+        x, st = self.krylov.solve(b)
+        V[self.free] = x
+        stats = _stats(st, self._pending_assembly_s, reassembled=self._pending_assembly_s > 0)
+        self._pending_assembly_s = 0.0
+        return V, stats
+
+    def _lift(self, V: np.ndarray) -> np.ndarray:
+        """K_fD V_D on the free nodes: what the prescribed values push into the free rows."""
+        assert self.weights is not None
+        edges, loc, n = self.stiffness.edges, self.pattern.local, self.pattern.n
+        out = np.zeros(n)
+        for a, b in ((0, 1), (1, 0)):
+            rows, cols = edges[:, a], edges[:, b]
+            sel = (loc[rows] >= 0) & (loc[cols] < 0)
+            out -= np.bincount(loc[rows[sel]], self.weights[sel] * V[cols[sel]], minlength=n)
+        return out
+
+
+def _stats(st: SolveStats, assembly_s: float, *, reassembled: bool) -> PotentialStats:
+    return PotentialStats(
+        iterations=st.iterations,
+        residual=st.residual,
+        assembly_s=assembly_s,
+        setup_s=st.setup_s,
+        solve_s=st.solve_s,
+        reassembled=reassembled,
+        cached=False,
+    )
+
+
+@dataclass(frozen=True)
+class PotentialSolution:
+    """The driven potential: V (n_nodes,) in V, nodal current load (n_nodes,) in A, I, P."""
+
+    V: np.ndarray
+    load: np.ndarray
+    current_a: float
+    power_w: float
+    stats: PotentialStats
+
+
+class DrivenPotential:
+    """The electrode's potential for any drive, from one solve at unit current per (sigma, contact).
+
+    V is linear in the injected current I and P = I^2 R, so the unit-current field V1 (with
+    R = int j1 V1) serves both drives exactly: constant j uses I = j * area, constant power
+    I = sqrt(P / R). Re-solves only when the conductivity or the contact changes.
+    """
+
+    def __init__(self, solver: PotentialSolver) -> None:
+        self.solver = solver
+        self._contact: ContactWeights | None = None
+        self._unit: tuple[np.ndarray, np.ndarray, float] | None = None  # V1, load1, R
+
+    def invalidate(self) -> None:
+        self._unit = None
+
+    def unit_field(
+        self, sigma: np.ndarray | float, contact: ContactWeights
+    ) -> tuple[np.ndarray, np.ndarray, float, PotentialStats]:
+        """(V1, load1, R, stats): potential and load at 1 A, resistance R in ohm."""
+        changed = self.solver.set_conductivity(sigma)
+        if not changed and self._unit is not None and contact is self._contact:
+            V1, load1, R = self._unit
+            return V1, load1, R, PotentialStats(0, 0.0, 0.0, 0.0, 0.0, False, True)
+        load1 = contact.weights / contact.area_m2
+        V1, stats = self.solver.solve(load1)
+        R = delivered_power(load1, V1)
+        self._contact, self._unit = contact, (V1, load1, R)
+        return V1, load1, R, stats
+
+    def solve(
+        self, sigma: np.ndarray | float, contact: ContactWeights, drive: ElectrodeDrive
+    ) -> PotentialSolution:
+        """The potential for ``drive`` through ``contact`` in conductivity sigma (n_tets,)."""
+        V1, load1, R, stats = self.unit_field(sigma, contact)
+        current = drive_current(drive, contact.area_m2, R)
+        return PotentialSolution(
+            V=current * V1,
+            load=current * load1,
+            current_a=current,
+            power_w=current**2 * R,
+            stats=stats,
+        )
+
+
+def drive_current(drive: ElectrodeDrive, area_m2: float, resistance_ohm: float) -> float:
+    """Injected current I in A: j * area (constant current density) or sqrt(P / R) (power)."""
+    if drive.mode == "current_density":
+        return drive.current_density_a_per_m2 * area_m2
+    return float(np.sqrt(drive.power_w / resistance_ohm))
