@@ -143,6 +143,9 @@ async def update_electrode(
     """Apply electrode changes before the next step; returns the new control id."""
 
     def apply(sim: Any) -> int:
+        names = [e.name for e in sim.scene.electrodes]
+        if name not in names:
+            raise SceneError(f"name: unknown electrode {name!r}; electrodes: {', '.join(names)}")
         sim.set_electrode(name, **update.model_dump(exclude_none=True))
         rec.control_id += 1
         rec.dirty = True
