@@ -294,6 +294,20 @@ def write_report(
         )
     lines += [
         "",
+        "At 1000 steps/s with several clients the two shared cores are saturated by the server "
+        "and all clients in one Python process; the websockets client library reads ahead "
+        "without bound, so long latencies there are queueing inside the clients, not in the "
+        "server (which keeps one frame per client: see the slow-client table).",
+    ]
+    if meta["engine"] == "fake":
+        lines += [
+            "",
+            "Engine: the test stand-in (`tests/service/fake_engine.py`, near-zero step cost), "
+            "because `diathermy.engine.simulation` was not on main yet: these rows measure the "
+            "service itself. Re-run once the engine lands for end-to-end numbers.",
+        ]
+    lines += [
+        "",
         "## Bytes per frame",
         "",
         "| region | dtype | bytes | surface vertices |",
