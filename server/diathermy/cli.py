@@ -142,6 +142,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_train_parser(sub)
     add_evaluate_parser(sub)
+    from diathermy.service.cli import add_serve_parser  # FastAPI itself loads only when serving
+
+    add_serve_parser(sub)
     return p
 
 

@@ -1,0 +1,400 @@
+"""Service benchmark (loopback only, bounded): stream throughput and control latency for 1, 4
+and 16 clients, bytes per frame, and server memory under a slow client.
+
+    python benchmarks/service.py [--grid 9x9x17] [--seconds 4] [--engine auto|real|fake]
+
+The server runs in a child process (so its memory is its own); clients are asyncio websockets
+clients plus one raw-socket client that reads nothing. Writes benchmarks/results/service.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import socket
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(ROOT / "server"), str(ROOT)]
+
+import httpx  # noqa: E402
+from websockets.asyncio.client import connect  # noqa: E402
+
+from diathermy.service.encoding import unpack  # noqa: E402
+
+TOKEN = "bench-token"
+FIELDS = ["temperature", "displacement"]
+
+
+def engine_available() -> bool:
+    try:
+        import diathermy.engine.simulation  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def serve_child(args: argparse.Namespace) -> None:
+    """The child process: the app with the chosen engine under uvicorn."""
+    import uvicorn
+
+    from diathermy.service import Settings, create_app
+    from diathermy.service.jsonlog import configure_logging
+
+    engine = None
+    if args.engine == "fake":
+        from tests.service.fake_engine import FakeEngine
+
+        engine = FakeEngine()
+    settings = Settings(
+        port=args.port,
+        data_dir=Path(args.data_dir),
+        tokens=[TOKEN],
+        max_stream_rate_hz=1000.0,
+        max_sessions_per_token=64,
+        autosave_interval_s=3600,
+        log_level="WARNING",
+    )
+    configure_logging("WARNING")
+    app = create_app(settings, engine=engine)
+    uvicorn.run(
+        app,
+        host="127.0.0.1",
+        port=args.port,
+        ws="websockets-sansio",
+        log_config=None,
+        access_log=False,
+        ws_max_size=settings.max_message_bytes,
+    )
+
+
+def rss_mib(pid: int) -> tuple[float, float]:
+    """(current, peak) resident set of a process in MiB."""
+    status = Path(f"/proc/{pid}/status").read_text()
+    val = {ln.split(":")[0]: ln.split()[1] for ln in status.splitlines() if ln.startswith("Vm")}
+    return int(val["VmRSS"]) / 1024, int(val["VmHWM"]) / 1024
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+class Server:
+    def __init__(self, engine: str, data_dir: Path) -> None:
+        self.port = free_port()
+        self.url = f"http://127.0.0.1:{self.port}"
+        self.ws = f"ws://127.0.0.1:{self.port}"
+        self.proc = subprocess.Popen(
+            [
+                sys.executable,
+                __file__,
+                "serve-child",
+                "--port",
+                str(self.port),
+                "--data-dir",
+                str(data_dir),
+                "--engine",
+                engine,
+            ],
+        )
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            try:
+                if httpx.get(self.url + "/readyz").status_code == 200:
+                    break
+            except httpx.TransportError:
+                time.sleep(0.1)
+        self.http = httpx.Client(
+            base_url=self.url, headers={"Authorization": f"Bearer {TOKEN}"}, timeout=120
+        )
+
+    def session(self, grid: list[int]) -> str:
+        r = self.http.post("/v1/sessions", json={"builtin": "default", "grid": grid})
+        r.raise_for_status()
+        return str(r.json()["id"])
+
+    def stop(self) -> None:
+        self.proc.terminate()
+        self.proc.wait(timeout=30)
+
+
+async def stream_client(
+    url: str, *, rate_hz: float | None, seconds: float, out: dict[str, Any]
+) -> None:
+    """Subscribe, (if ``rate_hz``) start the run, send electrode controls, time their frames."""
+    async with connect(
+        url, additional_headers={"Authorization": f"Bearer {TOKEN}"}, max_size=None
+    ) as ws:
+        await ws.recv()  # hello
+        await ws.send(json.dumps({"type": "subscribe", "fields": FIELDS}))
+        if rate_hz is not None:
+            await ws.send(json.dumps({"type": "run", "rate_hz": rate_hz}))
+        frames: list[tuple[float, int]] = []
+        latencies: list[float] = []
+        pending: dict[int, float] = {}  # tag -> send time
+        waiting: list[tuple[int, float]] = []  # (control_id, send time)
+        tag = 0
+        t_start = time.monotonic() + 0.5  # warm-up before counting
+        t_end = t_start + seconds
+        next_control = t_start
+        dropped = 0
+        while time.monotonic() < t_end:
+            now = time.monotonic()
+            if now >= next_control:
+                tag += 1
+                pending[tag] = now
+                power = 50.0 if tag % 2 else 49.0
+                await ws.send(json.dumps({"type": "electrode", "power_w": power, "tag": tag}))
+                next_control = now + 0.25
+            try:
+                msg = unpack(await asyncio.wait_for(ws.recv(), timeout=0.05))
+            except TimeoutError:
+                continue
+            t = time.monotonic()
+            if msg["type"] == "ack" and msg.get("tag") in pending:
+                waiting.append((msg["control_id"], pending.pop(msg["tag"])))
+            elif msg["type"] == "frame":
+                if t >= t_start:
+                    frames.append((t, msg["step"]))
+                    dropped = msg["dropped"]
+                done = [w for w in waiting if msg["control_id"] >= w[0]]
+                for w in done:
+                    latencies.append(t - w[1])
+                    waiting.remove(w)
+        if rate_hz is not None:
+            await ws.send(json.dumps({"type": "pause"}))
+        span = frames[-1][0] - frames[0][0] if len(frames) > 1 else float("nan")
+        out["fps"] = (len(frames) - 1) / span
+        out["steps_per_s"] = (frames[-1][1] - frames[0][1]) / span
+        out["latencies"] = latencies
+        out["dropped"] = dropped
+
+
+async def fan_out(
+    server: Server, sid: str, n: int, seconds: float, rate_hz: float
+) -> dict[str, Any]:
+    url = f"{server.ws}/v1/sessions/{sid}/stream"
+    outs: list[dict[str, Any]] = [{} for _ in range(n)]
+    await asyncio.gather(
+        *[
+            stream_client(url, rate_hz=rate_hz if i == 0 else None, seconds=seconds, out=o)
+            for i, o in enumerate(outs)
+        ]
+    )
+    lat = sorted(x for o in outs for x in o["latencies"])
+    q = statistics.quantiles(lat, n=100) if len(lat) >= 2 else [float("nan")] * 99
+    return {
+        "clients": n,
+        "rate_hz": rate_hz,
+        "steps_per_s": outs[0]["steps_per_s"],
+        "fps_per_client": statistics.median(o["fps"] for o in outs),
+        "fps_total": sum(o["fps"] for o in outs),
+        "p50_ms": 1e3 * q[49],
+        "p99_ms": 1e3 * q[98],
+        "samples": len(lat),
+        "dropped": sum(o["dropped"] for o in outs),
+    }
+
+
+async def frame_sizes(server: Server, sid: str) -> list[dict[str, Any]]:
+    rows = []
+    url = f"{server.ws}/v1/sessions/{sid}/stream"
+    async with connect(
+        url, additional_headers={"Authorization": f"Bearer {TOKEN}"}, max_size=None
+    ) as ws:
+        await ws.recv()
+        for region in ("volume", "surface"):
+            for dtype in ("float32", "float16"):
+                sub = {"type": "subscribe", "fields": FIELDS, "dtype": dtype, "region": region}
+                await ws.send(json.dumps(sub))
+                while True:
+                    raw = await ws.recv()
+                    msg = unpack(raw)
+                    if msg["type"] == "frame":
+                        break
+                verts = msg["surface"]["vertices"]["shape"][0] if region == "surface" else None
+                rows.append(
+                    {"region": region, "dtype": dtype, "bytes": len(raw), "surface_vertices": verts}
+                )
+    return rows
+
+
+def slow_client_memory(server: Server, sid: str, seconds: float) -> dict[str, Any]:
+    from tests.service.rawws import RawWebSocket
+
+    base, _ = rss_mib(server.proc.pid)
+    ws = RawWebSocket("127.0.0.1", server.port, f"/v1/sessions/{sid}/stream", TOKEN)
+    ws.recv()
+    ws.send_text(json.dumps({"type": "subscribe", "fields": FIELDS}))
+    ws.send_text(json.dumps({"type": "run", "rate_hz": 1000}))
+    peak = base
+    t_end = time.monotonic() + seconds
+    while time.monotonic() < t_end:  # read nothing
+        peak = max(peak, rss_mib(server.proc.pid)[0])
+        time.sleep(0.1)
+    ws.send_text(json.dumps({"type": "pause"}))
+    last = None
+    try:
+        while True:
+            msg = ws.recv(timeout=2.0)
+            if msg["type"] == "frame":
+                last = msg
+    except TimeoutError:
+        pass
+    ws.close()
+    steps = server.http.get(f"/v1/sessions/{sid}").json()["step"]
+    return {
+        "rss_before_mib": base,
+        "rss_peak_mib": peak,
+        "steps": steps,
+        "dropped": last["dropped"] if last else None,
+        "seconds": seconds,
+    }
+
+
+def write_report(
+    path: Path,
+    meta: dict[str, Any],
+    fan: list[dict[str, Any]],
+    sizes: list[dict[str, Any]],
+    slow: dict[str, Any],
+) -> None:
+    lines = [
+        "# Service benchmark",
+        "",
+        f"`python benchmarks/service.py {meta['argv']}` — engine: **{meta['engine']}**, grid "
+        f"{meta['grid']}, fields {', '.join(FIELDS)} (float32 volume), loopback, "
+        f"{meta['seconds']} s per row, {os.cpu_count()} cores (shared machine).",
+        "",
+        "## Streaming: N clients on one session",
+        "",
+        "One client starts the run at the target rate (1000/s is 'as fast as it goes'); all "
+        "subscribe to the same fields. Latency: from sending an electrode control message to "
+        "the first frame whose `control_id` shows it applied (every client sends one every "
+        "0.25 s). Frames dropped: coalesced for clients that fell behind (summed).",
+        "",
+        "| clients | target steps/s | steps/s | frames/s per client (median) | frames/s total | "
+        "latency p50 ms | latency p99 ms | samples | frames dropped |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in fan:
+        lines.append(
+            f"| {r['clients']} | {r['rate_hz']:.0f} | {r['steps_per_s']:.0f} | {r['fps_per_client']:.0f} | "
+            f"{r['fps_total']:.0f} | {r['p50_ms']:.1f} | {r['p99_ms']:.1f} | {r['samples']} | "
+            f"{r['dropped']} |"
+        )
+    lines += [
+        "",
+        "At 1000 steps/s with several clients the two shared cores are saturated by the server "
+        "and all clients in one Python process; the websockets client library reads ahead "
+        "without bound, so long latencies there are queueing inside the clients, not in the "
+        "server (which keeps one frame per client: see the slow-client table).",
+    ]
+    if meta["engine"] == "fake":
+        lines += [
+            "",
+            "Engine: the test stand-in (`tests/service/fake_engine.py`, near-zero step cost), "
+            "because `diathermy.engine.simulation` was not on main yet: these rows measure the "
+            "service itself. Re-run once the engine lands for end-to-end numbers.",
+        ]
+    lines += [
+        "",
+        "## Bytes per frame",
+        "",
+        "| region | dtype | bytes | surface vertices |",
+        "|---|---|---:|---:|",
+    ]
+    for r in sizes:
+        lines.append(
+            f"| {r['region']} | {r['dtype']} | {r['bytes']} | "
+            f"{'' if r['surface_vertices'] is None else r['surface_vertices']} |"
+        )
+    v32 = next(r["bytes"] for r in sizes if r["region"] == "volume" and r["dtype"] == "float32")
+    v16 = next(r["bytes"] for r in sizes if r["region"] == "volume" and r["dtype"] == "float16")
+    lines += ["", f"float16 / float32 volume: {v16 / v32:.2f}.", ""]
+    lines += [
+        "## Server memory under a slow client",
+        "",
+        f"A raw-socket client subscribes to volume frames on grid {slow['grid']}, starts the "
+        f"run and reads nothing for {slow['seconds']} s.",
+        "",
+        "| steps taken | frames dropped (coalesced) | server RSS before MiB | "
+        "server RSS peak MiB | growth MiB | frame bytes |",
+        "|---:|---:|---:|---:|---:|---:|",
+        f"| {slow['steps']} | {slow['dropped']} | {slow['rss_before_mib']:.0f} | "
+        f"{slow['rss_peak_mib']:.0f} | {slow['rss_peak_mib'] - slow['rss_before_mib']:.0f} | "
+        f"{slow['frame_bytes']} |",
+        "",
+        f"Without coalescing the server would have queued about "
+        f"{slow['steps'] * slow['frame_bytes'] / 2**20:.0f} MiB for this client.",
+        "",
+    ]
+    path.write_text("\n".join(lines), encoding="utf-8")
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__)
+    sub = p.add_subparsers(dest="cmd")
+    c = sub.add_parser("serve-child")
+    c.add_argument("--port", type=int, required=True)
+    c.add_argument("--data-dir", required=True)
+    c.add_argument("--engine", default="real")
+    p.add_argument("--grid", default="9x9x17", help="session grid NZxNYxNX")
+    p.add_argument("--slow-grid", default="17x17x33", help="grid of the slow-client run")
+    p.add_argument("--seconds", type=float, default=4.0)
+    p.add_argument("--clients", default="1,4,16")
+    p.add_argument("--engine", choices=["auto", "real", "fake"], default="auto")
+    p.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "service.md"))
+    args = p.parse_args()
+    if args.cmd == "serve-child":
+        serve_child(args)
+        return
+    engine = args.engine
+    if engine == "auto":
+        engine = "real" if engine_available() else "fake"
+    import tempfile
+
+    grid = [int(x) for x in args.grid.split("x")]
+    slow_grid = [int(x) for x in args.slow_grid.split("x")]
+    with tempfile.TemporaryDirectory() as tmp:
+        server = Server(engine, Path(tmp))
+        try:
+            fan = []
+            for rate in (30.0, 1000.0):
+                for n in (int(x) for x in args.clients.split(",")):
+                    sid = server.session(grid)
+                    fan.append(asyncio.run(fan_out(server, sid, n, args.seconds, rate)))
+                    print(fan[-1], flush=True)
+            sid = server.session(grid)
+            server.http.post(f"/v1/sessions/{sid}/step", json={"n": 20})  # make a cut
+            sizes = asyncio.run(frame_sizes(server, sid))
+            print(sizes, flush=True)
+            sid = server.session(slow_grid)
+            slow = slow_client_memory(server, sid, seconds=2 * args.seconds)
+            slow_sizes = asyncio.run(frame_sizes(server, sid))
+            slow["frame_bytes"] = slow_sizes[0]["bytes"]
+            slow["grid"] = args.slow_grid
+            print(slow, flush=True)
+        finally:
+            server.stop()
+    meta = {
+        "engine": engine,
+        "grid": args.grid,
+        "seconds": args.seconds,
+        "argv": " ".join(sys.argv[1:]),
+    }
+    write_report(Path(args.out), meta, fan, sizes, slow)
+    print(Path(args.out).read_text())
+
+
+if __name__ == "__main__":
+    main()

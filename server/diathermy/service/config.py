@@ -1,0 +1,49 @@
+"""The service's settings: one pydantic-settings object, read from ``DIATHERMY_*`` variables."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+from pydantic import Field, field_validator
+from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
+
+
+class Settings(BaseSettings):
+    """Everything the server can be told; the CLI overrides what it is given on top of these."""
+
+    model_config = SettingsConfigDict(env_prefix="DIATHERMY_", extra="ignore")
+
+    host: str = "127.0.0.1"
+    port: int = Field(default=8000, ge=0, le=65535)
+    data_dir: Path = Path("diathermy-data")
+    tokens: Annotated[list[str], NoDecode] = Field(
+        default_factory=list,
+        description="bearer tokens (comma-separated in DIATHERMY_TOKENS); 'sha256:<hex>' entries "
+        "are already hashed",
+    )
+    token_file: Path | None = Field(
+        default=None, description="one token (or sha256:<hex>) per line"
+    )
+    auth_disabled: bool = Field(
+        default=False, description="serve without auth: everyone is 'anonymous'"
+    )
+
+    max_grid_nodes: int = Field(default=300_000, ge=27)
+    max_memory_bytes: int = Field(default=4 * 2**30, ge=1)
+    max_steps_per_request: int = Field(default=200, ge=1)
+    max_sessions_per_token: int = Field(default=8, ge=1)
+    max_request_bytes: int = Field(default=1_000_000, ge=1024)
+    max_message_bytes: int = Field(default=65_536, ge=256)
+    max_stream_rate_hz: float = Field(default=60.0, gt=0)
+    autosave_interval_s: float = Field(
+        default=30.0, gt=0, description="checkpoint sessions this often"
+    )
+    log_level: str = "INFO"
+
+    @field_validator("tokens", mode="before")
+    @classmethod
+    def _split(cls, value: object) -> object:
+        if isinstance(value, str):
+            return [t.strip() for t in value.split(",") if t.strip()]
+        return value

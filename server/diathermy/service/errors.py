@@ -1,0 +1,124 @@
+"""The one place where errors become HTTP responses: ``{"error", "message", "field"}`` JSON."""
+
+from __future__ import annotations
+
+import logging
+import re
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from diathermy.errors import (
+    CheckpointError,
+    DiathermyError,
+    MeshError,
+    SceneError,
+    SolverDivergedError,
+)
+from diathermy.service.exceptions import (
+    AuthError,
+    BadRequestError,
+    LimitExceededError,
+    RequestTooLargeError,
+    ServiceError,
+    SessionBusyError,
+    SessionNotFoundError,
+    TooManySessionsError,
+)
+from diathermy.service.schemas import ErrorPublic
+
+log = logging.getLogger("diathermy.service.errors")
+
+STATUS: list[tuple[type[Exception], int, str]] = [
+    (AuthError, 401, "unauthorized"),
+    (SessionNotFoundError, 404, "not_found"),
+    (SessionBusyError, 409, "busy"),
+    (TooManySessionsError, 429, "too_many_sessions"),
+    (RequestTooLargeError, 413, "too_large"),
+    (LimitExceededError, 422, "limit_exceeded"),
+    (BadRequestError, 400, "bad_request"),
+    (SceneError, 422, "scene_error"),
+    (MeshError, 422, "mesh_error"),
+    (SolverDivergedError, 422, "solver_diverged"),
+    (CheckpointError, 409, "checkpoint_error"),
+    (DiathermyError, 400, "error"),
+]
+"""Exception class -> (HTTP status, error code); the first match wins, so subclasses come first."""
+
+_FIELD = re.compile(r"^([A-Za-z_][\w.\[\]]*): ")
+
+
+def classify(err: Exception) -> tuple[int, str, str | None]:
+    """(status, code, field) of an error; the field from ``ServiceError.field`` or 'path: ...'."""
+    for cls, status, code in STATUS:
+        if isinstance(err, cls):
+            field = err.field if isinstance(err, ServiceError) else None
+            if field is None:
+                m = _FIELD.match(str(err))
+                field = m.group(1) if m else None
+            return status, code, field
+    return 500, "internal", None
+
+
+def error_body(code: str, message: str, field: str | None = None) -> dict[str, str | None]:
+    return {"error": code, "message": message, "field": field}
+
+
+async def _diathermy_error(_request: Request, err: Exception) -> JSONResponse:
+    status, code, field = classify(err)
+    headers = {"WWW-Authenticate": "Bearer"} if status == 401 else None
+    return JSONResponse(error_body(code, str(err), field), status_code=status, headers=headers)
+
+
+async def _validation_error(_request: Request, err: Exception) -> JSONResponse:
+    assert isinstance(err, RequestValidationError)
+    problems = []
+    first_field = None
+    for e in err.errors():
+        loc = ".".join(str(p) for p in e.get("loc", ()))
+        first_field = first_field or loc
+        problems.append(f"{loc}: {str(e.get('msg', '')).removeprefix('Value error, ')}")
+    return JSONResponse(
+        error_body("validation_error", "; ".join(problems), first_field), status_code=422
+    )
+
+
+async def _http_error(_request: Request, err: Exception) -> JSONResponse:
+    assert isinstance(err, StarletteHTTPException)
+    code = {404: "not_found", 405: "method_not_allowed"}.get(err.status_code, "http_error")
+    return JSONResponse(
+        error_body(code, str(err.detail)), status_code=err.status_code, headers=err.headers
+    )
+
+
+async def _unexpected(request: Request, err: Exception) -> JSONResponse:
+    log.exception("unexpected error on %s %s", request.method, request.url.path)
+    return JSONResponse(
+        error_body("internal", f"internal error ({type(err).__name__}); see the server log"),
+        status_code=500,
+    )
+
+
+def install_error_handlers(app: FastAPI) -> None:
+    """Map the exception tree, request validation and routing errors to JSON responses."""
+    app.add_exception_handler(DiathermyError, _diathermy_error)
+    app.add_exception_handler(RequestValidationError, _validation_error)
+    app.add_exception_handler(StarletteHTTPException, _http_error)
+    app.add_exception_handler(Exception, _unexpected)
+
+
+ErrorResponses: dict[int | str, dict[str, object]] = {
+    status: {"model": ErrorPublic, "description": desc}
+    for status, desc in [
+        (400, "bad request (e.g. an unknown field name)"),
+        (401, "missing or unknown bearer token"),
+        (404, "no such session for this token"),
+        (409, "the session is busy stepping or restoring"),
+        (413, "request body too large"),
+        (422, "invalid input or over a limit; 'field' names it"),
+        (429, "too many sessions for this token"),
+    ]
+}
+"""The error responses every session route documents."""

@@ -1,0 +1,181 @@
+"""Fan-out of step frames to stream clients: one pending frame per client, newest wins.
+
+The engine thread calls ``StreamHub.publish`` after each step; each client's sender task takes
+frames from its ``FrameSlot``. A slow client therefore never makes the server queue frames: a new
+frame replaces the one it has not taken yet, and the replaced frame is counted as dropped.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import threading
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+from diathermy.service.encoding import encode_array, sample_nodal
+
+Region = Literal["volume", "surface"]
+
+
+def finite(obj: Any) -> Any:
+    """A copy of a JSON-like value with non-finite floats replaced by None."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {str(k): finite(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [finite(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return finite(obj.item())
+    return obj
+
+
+def report_dict(sim: Any) -> dict[str, Any] | None:
+    """The last step report of a simulation as a JSON-safe dict."""
+    rep = sim.last_report
+    return None if rep is None else finite(rep.to_dict())
+
+
+@dataclass(frozen=True)
+class Subscription:
+    """What a client wants: which fields, every k-th step, at which precision, where."""
+
+    fields: tuple[str, ...] = ()
+    every: int = 1
+    dtype: Literal["float16", "float32"] = "float32"
+    region: Region = "volume"
+
+
+@dataclass
+class Frame:
+    """One step's message minus the per-client counters, which are added when it is sent."""
+
+    header: dict[str, Any]
+    payload: dict[str, Any]
+
+
+class FrameSlot:
+    """A one-frame mailbox filled from any thread and emptied by one asyncio task.
+
+    ``wake`` (event-loop thread only) lets the owner wake its sender for other messages too.
+    """
+
+    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+        self._loop = loop
+        self._lock = threading.Lock()
+        self._frame: Frame | None = None
+        self._event = asyncio.Event()
+        self.dropped = 0
+
+    def put(self, frame: Frame) -> bool:
+        """Store ``frame``; returns True when it replaced an untaken one (a drop)."""
+        with self._lock:
+            replaced = self._frame is not None
+            self._frame = frame
+            if replaced:
+                self.dropped += 1
+        self._loop.call_soon_threadsafe(self._event.set)
+        return replaced
+
+    def wake(self) -> None:
+        self._event.set()
+
+    async def wait(self) -> Frame | None:
+        """Wait for a put or a wake; take the newest frame if there is one."""
+        await self._event.wait()
+        with self._lock:
+            self._event.clear()
+            frame, self._frame = self._frame, None
+        return frame
+
+    async def get(self) -> Frame:
+        """Wait for and take the newest frame."""
+        while True:
+            frame = await self.wait()
+            if frame is not None:
+                return frame
+
+
+@dataclass(eq=False)
+class Subscriber:
+    """One stream client of a session."""
+
+    slot: FrameSlot
+    subscription: Subscription = field(default_factory=Subscription)
+
+
+def build_payload(sim: Any, sub: Subscription) -> dict[str, Any]:
+    """The arrays of a frame: volume fields, or the cut surface with fields sampled on it."""
+    if sub.region == "volume":
+        return {"fields": {n: encode_array(sim.field(n), sub.dtype) for n in sub.fields}}
+    verts, faces = sim.cut_surface()
+    verts = np.asarray(verts, dtype=float).reshape(-1, 3)
+    grid = sim.grid
+    fields = {
+        n: encode_array(
+            sample_nodal(sim.field(n), verts, origin_m=grid.origin_m, spacing_m=grid.spacing_m),
+            sub.dtype,
+        )
+        for n in sub.fields
+    }
+    surface = {
+        "vertices": encode_array(verts, sub.dtype),
+        "faces": encode_array(np.asarray(faces, dtype=np.int32).reshape(-1, 3)),
+    }
+    return {"fields": fields, "surface": surface}
+
+
+class StreamHub:
+    """The subscribers of one session."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._subscribers: list[Subscriber] = []
+
+    def add(self, sub: Subscriber) -> None:
+        with self._lock:
+            self._subscribers.append(sub)
+
+    def remove(self, sub: Subscriber) -> None:
+        with self._lock:
+            if sub in self._subscribers:
+                self._subscribers.remove(sub)
+
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._subscribers)
+
+    def publish(
+        self,
+        sim: Any,
+        *,
+        session_id: str,
+        control_id: int,
+        only: Subscriber | None = None,
+    ) -> int:
+        """Offer the current state to subscribers due this step (or to ``only``); returns drops."""
+        with self._lock:
+            targets = [only] if only is not None else list(self._subscribers)
+        if not targets:
+            return 0
+        header = {
+            "type": "frame",
+            "session": session_id,
+            "step": int(sim.step_index),
+            "time_s": float(sim.time_s),
+            "control_id": control_id,
+            "report": report_dict(sim),
+        }
+        cache: dict[Subscription, dict[str, Any]] = {}
+        drops = 0
+        for s in targets:
+            sub = s.subscription
+            if only is None and sim.step_index % sub.every:
+                continue
+            if sub not in cache:
+                cache[sub] = build_payload(sim, sub)
+            drops += s.slot.put(Frame(header=header, payload=cache[sub]))
+        return drops

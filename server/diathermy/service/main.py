@@ -1,0 +1,80 @@
+"""Builds the app: settings, state, middleware, error handlers, routers, start-up and shutdown."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import AsyncIterator
+
+import anyio.to_thread
+from fastapi import FastAPI
+
+from diathermy.service.auth import TokenStore
+from diathermy.service.config import Settings
+from diathermy.service.engine import DefaultEngine, EngineAdapter
+from diathermy.service.errors import install_error_handlers
+from diathermy.service.metrics import ServiceMetrics
+from diathermy.service.middleware import LimitAndLogMiddleware
+from diathermy.service.registry import SessionRegistry
+from diathermy.service.routes import fields, health, scenes, sessions, stream
+from diathermy.service.sessions import save_dirty
+from diathermy.service.state import AppState
+from diathermy.version import __version__
+
+log = logging.getLogger("diathermy.service")
+
+
+async def _autosave(state: AppState) -> None:
+    while True:
+        await asyncio.sleep(state.settings.autosave_interval_s)
+        try:
+            await save_dirty(registry=state.registry, wait=False)
+        except Exception:
+            log.exception("autosave failed")
+
+
+def create_app(settings: Settings | None = None, *, engine: EngineAdapter | None = None) -> FastAPI:
+    """The FastAPI app; ``engine`` replaces the default engine (tests, other backends)."""
+    settings = settings or Settings()
+    state = AppState(
+        settings=settings,
+        tokens=TokenStore.from_settings(settings),
+        registry=SessionRegistry(settings.data_dir, engine or DefaultEngine()),
+        metrics=ServiceMetrics(),
+    )
+
+    @contextlib.asynccontextmanager
+    async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
+        state.tokens.warn_if_disabled()
+        n = await anyio.to_thread.run_sync(state.registry.scan)
+        state.metrics.sessions.set(n)
+        state.ready = True
+        log.info("ready", extra={"sessions": n, "data_dir": str(settings.data_dir)})
+        saver = asyncio.create_task(_autosave(state))
+        try:
+            yield
+        finally:
+            state.ready = False
+            saver.cancel()
+            for rec in list(state.registry.sessions.values()):
+                if rec.driver is not None:
+                    await rec.driver.stop()
+            saved = await save_dirty(registry=state.registry, wait=True)
+            log.info("stopped", extra={"saved_sessions": saved})
+
+    app = FastAPI(
+        title="diathermy",
+        version=__version__,
+        description="Electrosurgery simulation sessions over REST and WebSocket. "
+        "Stream wire format: docs/service.md and openapi/stream-messages.json.",
+        lifespan=lifespan,
+    )
+    app.state.diathermy = state
+    app.add_middleware(
+        LimitAndLogMiddleware, max_bytes=settings.max_request_bytes, metrics=state.metrics
+    )
+    install_error_handlers(app)
+    for module in (health, scenes, sessions, fields, stream):
+        app.include_router(module.router)
+    return app

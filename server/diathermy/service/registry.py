@@ -1,0 +1,186 @@
+"""Sessions in memory and on disk: ids, owners, locks, checkpoints and their metadata.
+
+Layout of the data directory::
+
+    sessions/<id>/meta.json          owner (token sha256), scene name, grid, step, time, snapshots
+    sessions/<id>/state.h5           the latest checkpoint (restored after a restart)
+    sessions/<id>/snapshots/<s>.h5   named snapshots a client asked for
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import os
+import shutil
+import time
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from diathermy.errors import CheckpointError
+from diathermy.service.engine import EngineAdapter
+from diathermy.service.exceptions import SessionNotFoundError
+from diathermy.service.hub import StreamHub
+
+log = logging.getLogger("diathermy.service.registry")
+
+
+def _write_json_atomic(path: Path, data: dict[str, Any]) -> None:
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(data, indent=1), encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def sim_meta(sim: Any) -> dict[str, Any]:
+    """What a listing needs without loading the simulation."""
+    g = sim.grid
+    return {
+        "scene_name": sim.scene.name,
+        "grid": {
+            "shape": list(g.shape),
+            "spacing_m": list(g.spacing_m),
+            "origin_m": list(g.origin_m),
+            "size_m": list(g.size_m),
+            "n_nodes": int(g.n_nodes),
+        },
+        "effects": list(sim.effects),
+        "dof_counts": {k: int(v) for k, v in sim.dof_counts().items()},
+        "step": int(sim.step_index),
+        "time_s": float(sim.time_s),
+    }
+
+
+@dataclass(eq=False)
+class SessionRecord:
+    """One session: its owner, metadata, the simulation once loaded, and what guards it."""
+
+    id: str
+    owner: str
+    directory: Path
+    meta: dict[str, Any]
+    sim: Any = None
+    lock: asyncio.Lock = field(default_factory=asyncio.Lock)
+    hub: StreamHub = field(default_factory=StreamHub)
+    control_id: int = 0
+    dirty: bool = False
+    driver: Any = None  # the stream driver (stream.SessionDriver) while clients are connected
+
+    @property
+    def state_path(self) -> Path:
+        return self.directory / "state.h5"
+
+    @property
+    def meta_path(self) -> Path:
+        return self.directory / "meta.json"
+
+    def snapshot_path(self, snapshot_id: str) -> Path:
+        return self.directory / "snapshots" / f"{snapshot_id}.h5"
+
+    def refresh_meta(self) -> None:
+        """Copy the simulation's step, time and shape into the metadata."""
+        if self.sim is not None:
+            self.meta.update(sim_meta(self.sim))
+
+    def write_meta(self) -> None:
+        _write_json_atomic(self.meta_path, self.meta)
+
+
+class SessionRegistry:
+    """All sessions, keyed by id; lookups are by (owner, id) so other owners see nothing."""
+
+    def __init__(self, data_dir: Path, engine: EngineAdapter) -> None:
+        self.root = Path(data_dir) / "sessions"
+        self.engine = engine
+        self.sessions: dict[str, SessionRecord] = {}
+
+    def scan(self) -> int:
+        """Register every session found on disk (not loaded until first use); returns the count."""
+        self.root.mkdir(parents=True, exist_ok=True)
+        for meta_path in sorted(self.root.glob("*/meta.json")):
+            try:
+                meta = json.loads(meta_path.read_text(encoding="utf-8"))
+                sid, owner = str(meta["id"]), str(meta["owner"])
+            except (OSError, ValueError, KeyError) as err:
+                log.error("skipping unreadable session %s: %s", meta_path.parent.name, err)
+                continue
+            if not (meta_path.parent / "state.h5").exists():
+                log.error("skipping session %s: it has no checkpoint", sid)
+                continue
+            self.sessions[sid] = SessionRecord(
+                id=sid, owner=owner, directory=meta_path.parent, meta=meta
+            )
+        return len(self.sessions)
+
+    def owned(self, owner: str) -> list[SessionRecord]:
+        return [r for r in self.sessions.values() if r.owner == owner]
+
+    def get(self, owner: str, session_id: str) -> SessionRecord:
+        rec = self.sessions.get(session_id)
+        if rec is None or rec.owner != owner:
+            raise SessionNotFoundError(f"no session {session_id!r}", field="session_id")
+        return rec
+
+    def add(self, *, owner: str, sim: Any) -> SessionRecord:
+        """Register a new session around a built simulation and checkpoint it (engine thread)."""
+        sid = uuid.uuid4().hex[:16]
+        directory = self.root / sid
+        (directory / "snapshots").mkdir(parents=True)
+        meta = {"id": sid, "owner": owner, "created_at": time.time(), "snapshots": []}
+        rec = SessionRecord(id=sid, owner=owner, directory=directory, meta=meta, sim=sim)
+        self.save(rec)
+        self.sessions[sid] = rec
+        return rec
+
+    def load(self, rec: SessionRecord) -> Any:
+        """The session's simulation, read from its checkpoint if not yet in memory (engine thread)."""
+        if rec.sim is None:
+            t0 = time.perf_counter()
+            rec.sim = self.engine.load(rec.state_path)
+            log.info(
+                "restored session",
+                extra={"session": rec.id, "seconds": round(time.perf_counter() - t0, 3)},
+            )
+        return rec.sim
+
+    def save(self, rec: SessionRecord) -> None:
+        """Checkpoint the session and its metadata (engine thread, under the session lock)."""
+        rec.refresh_meta()
+        tmp = rec.state_path.with_suffix(".h5.tmp")
+        rec.sim.save_checkpoint(tmp)
+        os.replace(tmp, rec.state_path)
+        rec.meta["saved_at"] = time.time()
+        rec.write_meta()
+        rec.dirty = False
+
+    def snapshot(self, rec: SessionRecord) -> dict[str, Any]:
+        """Write a named snapshot of the current state (engine thread, under the session lock)."""
+        snap_id = uuid.uuid4().hex[:12]
+        snap: dict[str, Any] = {
+            "id": snap_id,
+            "step": int(rec.sim.step_index),
+            "time_s": float(rec.sim.time_s),
+            "created_at": time.time(),
+        }
+        rec.sim.save_checkpoint(rec.snapshot_path(snap_id))
+        rec.meta.setdefault("snapshots", []).append(snap)
+        rec.write_meta()
+        return snap
+
+    def restore(self, rec: SessionRecord, snapshot_id: str) -> None:
+        """Replace the session's state by a snapshot's (engine thread, under the session lock)."""
+        path = rec.snapshot_path(snapshot_id)
+        if not path.exists():
+            raise SessionNotFoundError(f"no snapshot {snapshot_id!r}", field="snapshot_id")
+        sim = self.engine.load(path)
+        if rec.sim is not None and tuple(sim.grid.shape) != tuple(rec.sim.grid.shape):
+            raise CheckpointError(f"snapshot {snapshot_id!r} does not match the session's grid")
+        rec.sim = sim
+        self.save(rec)
+
+    def remove(self, rec: SessionRecord) -> None:
+        """Forget a session and delete its files."""
+        self.sessions.pop(rec.id, None)
+        shutil.rmtree(rec.directory, ignore_errors=True)

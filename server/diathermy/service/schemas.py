@@ -1,0 +1,121 @@
+"""Request and response models of the REST API (the ``SessionCreate``/``SessionPublic`` family)."""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from diathermy.scene import Scene
+
+
+class _In(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class SessionCreate(_In):
+    """A new session from an inline scene or a built-in scene name, optionally on another grid."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={"examples": [{"builtin": "default", "grid": [5, 5, 9]}]},
+    )
+
+    scene: Scene | None = Field(None, description="an inline scene")
+    builtin: str | None = Field(None, description="a built-in scene name, e.g. 'default'")
+    grid: tuple[int, int, int] | None = Field(
+        None, description="override the scene's grid, nodes (nz, ny, nx)"
+    )
+
+    @model_validator(mode="after")
+    def _one_source(self) -> SessionCreate:
+        if (self.scene is None) == (self.builtin is None):
+            raise ValueError("give exactly one of 'scene' and 'builtin'")
+        return self
+
+
+class GridPublic(BaseModel):
+    shape: tuple[int, int, int] = Field(description="nodes (nz, ny, nx)")
+    spacing_m: tuple[float, float, float] = Field(description="(dx, dy, dz) in m")
+    origin_m: tuple[float, float, float]
+    size_m: tuple[float, float, float]
+    n_nodes: int
+
+
+class SnapshotPublic(BaseModel):
+    id: str
+    step: int
+    time_s: float
+    created_at: float
+
+
+class SessionPublic(BaseModel):
+    """A session as clients see it."""
+
+    id: str
+    scene_name: str
+    grid: GridPublic
+    effects: list[str]
+    dof_counts: dict[str, int]
+    step: int
+    time_s: float
+    created_at: float
+    loaded: bool = Field(description="whether the simulation is in memory (else on disk)")
+    last_report: dict[str, Any] | None = None
+    snapshots: list[SnapshotPublic] = []
+
+
+class SessionList(BaseModel):
+    sessions: list[SessionPublic]
+
+
+class StepRequest(_In):
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"n": 2}]})
+
+    n: int = Field(1, ge=1, description="steps to take (bounded by the server's limit)")
+
+
+class StepResult(BaseModel):
+    step: int
+    time_s: float
+    reports: list[dict[str, Any]]
+
+
+class ElectrodeUpdate(_In):
+    """Run-time changes to one electrode, applied before the next step; omitted means unchanged."""
+
+    position_m: tuple[float, float] | None = Field(None, description="(x, y) on the top surface")
+    power_w: float | None = Field(None, ge=0, allow_inf_nan=False)
+    current_density_a_per_m2: float | None = Field(None, ge=0, allow_inf_nan=False)
+    active: bool | None = None
+
+
+class ElectrodeAck(BaseModel):
+    name: str
+    control_id: int = Field(description="stream frames with control_id >= this reflect the change")
+
+
+class SurfacePublic(BaseModel):
+    """The cut surface as a triangle mesh (empty when nothing is cut)."""
+
+    step: int
+    time_s: float
+    vertices_m: list[tuple[float, float, float]]
+    faces: list[tuple[int, int, int]]
+
+
+class ErrorPublic(BaseModel):
+    """Every error response: a machine-readable code, a message, and the offending field."""
+
+    error: str = Field(description="error code, e.g. 'scene_error', 'limit_exceeded'")
+    message: str
+    field: str | None = None
+
+
+class Health(BaseModel):
+    status: Literal["ok", "starting"]
+    sessions: int = 0
+
+
+FieldFormat = Literal["msgpack", "npz"]
+FieldDtype = Literal["float16", "float32", "float64"]

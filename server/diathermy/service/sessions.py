@@ -1,0 +1,255 @@
+"""What the session routes do, as keyword-only functions that return values (no HTTP here).
+
+Engine work runs in worker threads under the session's lock, so a long step never blocks the
+event loop or other sessions. A step or restore on a session that is busy raises
+``SessionBusyError`` at once (HTTP 409); reads wait for the lock.
+"""
+
+from __future__ import annotations
+
+import logging
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, TypeVar
+
+import anyio.to_thread
+import numpy as np
+
+from diathermy.errors import SceneError
+from diathermy.scene import builtin_scene, scene_from_dict
+from diathermy.service.config import Settings
+from diathermy.service.exceptions import (
+    BadRequestError,
+    SessionBusyError,
+    SessionNotFoundError,
+)
+from diathermy.service.hub import report_dict
+from diathermy.service.limits import check_grid, check_session_count, check_steps
+from diathermy.service.metrics import ServiceMetrics
+from diathermy.service.registry import SessionRecord, SessionRegistry
+from diathermy.service.schemas import (
+    ElectrodeUpdate,
+    GridPublic,
+    SessionCreate,
+    SessionPublic,
+    SnapshotPublic,
+)
+
+T = TypeVar("T")
+log = logging.getLogger("diathermy.service.sessions")
+
+
+async def run_locked(
+    rec: SessionRecord,
+    registry: SessionRegistry,
+    fn: Callable[[Any], T],
+    *,
+    wait: bool = True,
+) -> T:
+    """Run ``fn(sim)`` in a worker thread under the session lock (loading the session first)."""
+    if not wait and rec.lock.locked():
+        raise SessionBusyError(
+            f"session {rec.id} is busy with another step or restore; retry when it is done"
+        )
+    async with rec.lock:
+        return await anyio.to_thread.run_sync(lambda: fn(registry.load(rec)))
+
+
+async def create_session(
+    *,
+    registry: SessionRegistry,
+    settings: Settings,
+    metrics: ServiceMetrics,
+    owner: str,
+    body: SessionCreate,
+) -> SessionRecord:
+    """Validate limits, build the simulation off the event loop, register and checkpoint it."""
+    check_session_count(settings, len(registry.owned(owner)))
+    if body.builtin is not None:
+        try:
+            scene = builtin_scene(body.builtin)
+        except SceneError as err:
+            raise SceneError(f"builtin: {err}") from None
+    else:
+        assert body.scene is not None
+        scene = body.scene
+    if body.grid is not None:
+        data = scene.model_dump()
+        data["grid"] = body.grid
+        scene = scene_from_dict(data)
+    check_grid(settings, scene.grid)
+
+    def build() -> SessionRecord:
+        sim = registry.engine.create(scene)
+        return registry.add(owner=owner, sim=sim)
+
+    rec = await anyio.to_thread.run_sync(build)
+    metrics.sessions.set(len(registry.sessions))
+    metrics.sessions_loaded.set(sum(r.sim is not None for r in registry.sessions.values()))
+    log.info("created session", extra={"session": rec.id, "scene": scene.name})
+    return rec
+
+
+def session_public(rec: SessionRecord) -> SessionPublic:
+    """The public view of a session, from its metadata (and the live simulation if loaded)."""
+    rec.refresh_meta()
+    m = rec.meta
+    return SessionPublic(
+        id=rec.id,
+        scene_name=m["scene_name"],
+        grid=GridPublic(**m["grid"]),
+        effects=m["effects"],
+        dof_counts=m["dof_counts"],
+        step=m["step"],
+        time_s=m["time_s"],
+        created_at=m["created_at"],
+        loaded=rec.sim is not None,
+        last_report=report_dict(rec.sim) if rec.sim is not None else None,
+        snapshots=[SnapshotPublic(**s) for s in m.get("snapshots", [])],
+    )
+
+
+def advance(rec: SessionRecord, sim: Any, n: int, metrics: ServiceMetrics) -> list[Any]:
+    """Take ``n`` steps, publishing each to stream subscribers (engine thread, under the lock)."""
+    reports = []
+    for _ in range(n):
+        rep = sim.step()
+        rec.dirty = True
+        metrics.observe_report(rep)
+        drops = rec.hub.publish(sim, session_id=rec.id, control_id=rec.control_id)
+        if drops:
+            metrics.frames_dropped.inc(drops)
+        reports.append(rep)
+    return reports
+
+
+async def step_session(
+    *,
+    registry: SessionRegistry,
+    settings: Settings,
+    metrics: ServiceMetrics,
+    rec: SessionRecord,
+    n: int,
+) -> list[Any]:
+    """Step a session ``n`` times; returns the step reports."""
+    check_steps(settings, n)
+    return await run_locked(rec, registry, lambda sim: advance(rec, sim, n, metrics), wait=False)
+
+
+async def update_electrode(
+    *, registry: SessionRegistry, rec: SessionRecord, name: str, update: ElectrodeUpdate
+) -> int:
+    """Apply electrode changes before the next step; returns the new control id."""
+
+    def apply(sim: Any) -> int:
+        names = [e.name for e in sim.scene.electrodes]
+        if name not in names:
+            raise SceneError(f"name: unknown electrode {name!r}; electrodes: {', '.join(names)}")
+        sim.set_electrode(name, **update.model_dump(exclude_none=True))
+        rec.control_id += 1
+        rec.dirty = True
+        return rec.control_id
+
+    return await run_locked(rec, registry, apply)
+
+
+def parse_field_names(text: str | None, available: list[str]) -> list[str]:
+    """``a,b,c`` -> names, each checked against the session's fields."""
+    names = [n.strip() for n in (text or "").split(",") if n.strip()]
+    if not names:
+        raise BadRequestError(
+            f"name at least one field; available: {', '.join(available)}", field="fields"
+        )
+    unknown = [n for n in names if n not in available]
+    if unknown:
+        raise BadRequestError(
+            f"unknown field(s) {', '.join(unknown)}; available: {', '.join(available)}",
+            field="fields",
+        )
+    return list(dict.fromkeys(names))
+
+
+async def read_fields(
+    *, registry: SessionRegistry, rec: SessionRecord, fields: str | None, dtype: str
+) -> tuple[int, float, dict[str, np.ndarray]]:
+    """(step, time, arrays) of the named fields, floats cast to ``dtype``."""
+
+    def read(sim: Any) -> tuple[int, float, dict[str, np.ndarray]]:
+        names = parse_field_names(fields, list(sim.field_names()))
+        arrays = {n: np.asarray(sim.field(n)) for n in names}
+        with np.errstate(over="ignore"):
+            arrays = {n: a.astype(dtype) if a.dtype.kind == "f" else a for n, a in arrays.items()}
+        return int(sim.step_index), float(sim.time_s), arrays
+
+    return await run_locked(rec, registry, read)
+
+
+async def read_surface(
+    *, registry: SessionRegistry, rec: SessionRecord
+) -> tuple[int, float, np.ndarray, np.ndarray]:
+    """(step, time, vertices (n, 3) m, faces (m, 3)) of the cut surface."""
+
+    def read(sim: Any) -> tuple[int, float, np.ndarray, np.ndarray]:
+        verts, faces = sim.cut_surface()
+        return (
+            int(sim.step_index),
+            float(sim.time_s),
+            np.asarray(verts, dtype=float).reshape(-1, 3),
+            np.asarray(faces, dtype=np.int64).reshape(-1, 3),
+        )
+
+    return await run_locked(rec, registry, read)
+
+
+async def vtu_bytes(*, registry: SessionRegistry, rec: SessionRecord) -> bytes:
+    """The current state as a ParaView .vtu file."""
+
+    def write(sim: Any) -> bytes:
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "state.vtu"
+            sim.write_vtu(path)
+            return path.read_bytes()
+
+    return await run_locked(rec, registry, write)
+
+
+async def take_snapshot(*, registry: SessionRegistry, rec: SessionRecord) -> SnapshotPublic:
+    """Write a named snapshot of the session's current state."""
+    snap = await run_locked(rec, registry, lambda _sim: registry.snapshot(rec))
+    return SnapshotPublic(**snap)
+
+
+async def restore_snapshot(
+    *, registry: SessionRegistry, rec: SessionRecord, snapshot_id: str
+) -> SessionRecord:
+    """Put the session back to a snapshot's state."""
+    if not any(s["id"] == snapshot_id for s in rec.meta.get("snapshots", [])):
+        raise SessionNotFoundError(f"no snapshot {snapshot_id!r}", field="snapshot_id")
+    await run_locked(rec, registry, lambda _sim: registry.restore(rec, snapshot_id), wait=False)
+    rec.control_id += 1
+    return rec
+
+
+async def delete_session(
+    *, registry: SessionRegistry, metrics: ServiceMetrics, rec: SessionRecord
+) -> None:
+    """Stop the session's stream driver and remove it from memory and disk."""
+    if rec.driver is not None:
+        await rec.driver.stop()
+    async with rec.lock:
+        await anyio.to_thread.run_sync(lambda: registry.remove(rec))
+    metrics.sessions.set(len(registry.sessions))
+
+
+async def save_dirty(*, registry: SessionRegistry, wait: bool) -> int:
+    """Checkpoint every loaded session that changed; skips busy ones unless ``wait``."""
+    saved = 0
+    for rec in list(registry.sessions.values()):
+        if rec.sim is None or not rec.dirty or (not wait and rec.lock.locked()):
+            continue
+        async with rec.lock:
+            if rec.id in registry.sessions:
+                await anyio.to_thread.run_sync(registry.save, rec)
+                saved += 1
+    return saved

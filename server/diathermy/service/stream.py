@@ -1,0 +1,360 @@
+"""The WebSocket stream of a session: subscriptions, control messages, and the stepping driver.
+
+One ``SessionDriver`` per session steps it while any client asked it to run (at the requested
+rate, capped by the server) and takes single steps on request; every step is published to all
+subscribers through their one-frame slots. Protocol errors close the socket with code 4400 and a
+JSON reason; a rejected value (an unknown electrode, a position off the block) only answers with
+an ``error`` message.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import time
+from collections import deque
+from collections.abc import Awaitable, Callable, Mapping
+from typing import Any
+
+from pydantic import ValidationError
+from starlette.websockets import WebSocket, WebSocketDisconnect, WebSocketState
+
+from diathermy.errors import DiathermyError
+from diathermy.scene.io import describe_validation_error
+from diathermy.service.encoding import pack, unpack
+from diathermy.service.errors import classify
+from diathermy.service.exceptions import BadRequestError
+from diathermy.service.hub import FrameSlot, Subscriber, Subscription
+from diathermy.service.messages import (
+    ElectrodeControl,
+    Pause,
+    Run,
+    Step,
+    Subscribe,
+    client_message,
+)
+from diathermy.service.registry import SessionRecord
+from diathermy.service.schemas import ElectrodeUpdate
+from diathermy.service.sessions import advance, run_locked, update_electrode
+from diathermy.service.state import AppState
+
+log = logging.getLogger("diathermy.service.stream")
+
+CLOSE_BAD_MESSAGE = 4400
+CLOSE_UNAUTHORIZED = 4401
+CLOSE_NOT_FOUND = 4404
+CLOSE_TOO_BIG = 1009
+MAX_PENDING_REPLIES = 64
+
+Notify = Callable[[dict[str, Any]], Awaitable[None]]
+
+
+class SessionDriver:
+    """Steps one session for its stream clients: continuously at a rate, or n steps on demand."""
+
+    def __init__(self, rec: SessionRecord, state: AppState) -> None:
+        self.rec = rec
+        self.state = state
+        self.running = False
+        self.rate_hz = 10.0
+        self.pending = 0
+        self.clients: dict[Subscriber, Notify] = {}
+        self._wake = asyncio.Event()
+        self._task: asyncio.Task[None] | None = None
+
+    def attach(self, sub: Subscriber, notify: Notify) -> None:
+        self.clients[sub] = notify
+        self.rec.hub.add(sub)
+        if self._task is None:
+            self._task = asyncio.create_task(self._loop(), name=f"driver-{self.rec.id}")
+
+    async def detach(self, sub: Subscriber) -> None:
+        self.clients.pop(sub, None)
+        self.rec.hub.remove(sub)
+        if not self.clients:
+            await self.stop()
+
+    async def stop(self) -> None:
+        """Stop stepping and end the task (the last client left, or the session is deleted)."""
+        self.running = False
+        self.pending = 0
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+            self._task = None
+        if self.rec.driver is self:
+            self.rec.driver = None
+
+    def run(self, rate_hz: float) -> None:
+        self.rate_hz = min(rate_hz, self.state.settings.max_stream_rate_hz)
+        self.running = True
+        self._wake.set()
+
+    def pause(self) -> None:
+        self.running = False
+
+    def step(self, n: int) -> None:
+        self.pending += n
+        self._wake.set()
+
+    async def _broadcast(self, msg: dict[str, Any]) -> None:
+        for notify in list(self.clients.values()):
+            with contextlib.suppress(Exception):
+                await notify(msg)
+
+    async def _loop(self) -> None:
+        next_t = time.monotonic()
+        while True:
+            if not self.running and self.pending == 0:
+                self._wake.clear()
+                await self._wake.wait()
+                next_t = time.monotonic()
+                continue
+            try:
+                await run_locked(
+                    self.rec,
+                    self.state.registry,
+                    lambda sim: advance(self.rec, sim, 1, self.state.metrics),
+                )
+            except DiathermyError as err:
+                self.running, self.pending = False, 0
+                _, code, field = classify(err)
+                await self._broadcast(
+                    {"type": "error", "error": code, "message": str(err), "field": field}
+                )
+                continue
+            if self.pending:
+                self.pending -= 1
+                await asyncio.sleep(0)
+            elif self.running:
+                next_t += 1.0 / self.rate_hz
+                delay = next_t - time.monotonic()
+                if delay < 0:
+                    next_t, delay = time.monotonic(), 0.0
+                await asyncio.sleep(delay)
+
+
+def driver_of(rec: SessionRecord, state: AppState) -> SessionDriver:
+    if rec.driver is None:
+        rec.driver = SessionDriver(rec, state)
+    return rec.driver
+
+
+def parse_message(raw: Mapping[str, Any]) -> Any:
+    """A client message from a websocket.receive event; raises BadRequestError naming the field."""
+    try:
+        if raw.get("text") is not None:
+            data = json.loads(raw["text"])
+        else:
+            data = unpack(raw.get("bytes") or b"")
+    except ValueError as err:
+        raise BadRequestError(f"message is neither JSON text nor msgpack: {err}") from None
+    except Exception as err:  # msgpack raises several unrelated types on garbage
+        raise BadRequestError(f"message is neither JSON text nor msgpack: {err}") from None
+    try:
+        return client_message.validate_python(data)
+    except ValidationError as err:
+        loc = err.errors()[0].get("loc", ()) if err.errors() else ()
+        raise BadRequestError(
+            describe_validation_error(err), field=".".join(str(p) for p in loc) or None
+        ) from None
+
+
+def close_reason(code: str, message: str, field: str | None) -> str:
+    """A JSON close reason that fits the 123-byte limit of a close frame."""
+    body = {"error": code, "message": message, "field": field}
+    text = json.dumps(body)
+    while len(text.encode()) > 123 and body["message"]:
+        body["message"] = body["message"][: max(0, len(body["message"]) - 16)]
+        text = json.dumps(body)
+    return text
+
+
+class StreamConnection:
+    """One client's socket: a receive loop for control messages and a sender task for frames."""
+
+    def __init__(self, ws: WebSocket, rec: SessionRecord, state: AppState) -> None:
+        self.ws = ws
+        self.rec = rec
+        self.state = state
+        self.sub = Subscriber(slot=FrameSlot(asyncio.get_running_loop()))
+        self.replies: deque[dict[str, Any]] = deque()
+        self._sender_task: asyncio.Task[None] | None = None
+
+    async def send(self, msg: dict[str, Any]) -> None:
+        """Queue a reply (hello, ack, error) for the sender; never waits on a slow socket."""
+        if len(self.replies) >= MAX_PENDING_REPLIES:
+            raise BadRequestError("client sends control messages faster than it reads replies")
+        self.replies.append(msg)
+        self.sub.slot.wake()
+
+    async def _sender(self) -> None:
+        """The only writer of the socket: replies first, then the newest frame."""
+        while True:
+            frame = await self.sub.slot.wait()
+            while self.replies:
+                await self.ws.send_bytes(pack(self.replies.popleft()))
+            if frame is not None:
+                msg = {**frame.header, "dropped": self.sub.slot.dropped, **frame.payload}
+                await self.ws.send_bytes(pack(msg))
+                self.state.metrics.frames_sent.inc()
+
+    async def serve(self) -> None:
+        driver = driver_of(self.rec, self.state)
+        hello = await run_locked(self.rec, self.state.registry, self._hello)
+        await self.send(hello)
+        driver.attach(self.sub, self.send)
+        self.state.metrics.stream_clients.inc()
+        sender = self._sender_task = asyncio.create_task(self._sender())
+        try:
+            await self._receive_loop(driver)
+            await self._flush(sender)
+        finally:
+            sender.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await sender
+            self.state.metrics.stream_clients.dec()
+            await driver.detach(self.sub)
+
+    async def _flush(self, sender: asyncio.Task[None], timeout_s: float = 2.0) -> None:
+        """Give the sender a moment to deliver queued replies (e.g. the error before a close)."""
+        deadline = time.monotonic() + timeout_s
+        while self.replies and not sender.done() and time.monotonic() < deadline:
+            await asyncio.sleep(0.005)
+
+    def _hello(self, sim: Any) -> dict[str, Any]:
+        return {
+            "type": "hello",
+            "session": self.rec.id,
+            "step": int(sim.step_index),
+            "time_s": float(sim.time_s),
+            "fields": list(sim.field_names()),
+            "effects": list(sim.effects),
+            "electrodes": [e.name for e in sim.scene.electrodes],
+        }
+
+    async def _receive_loop(self, driver: SessionDriver) -> None:
+        limit = self.state.settings.max_message_bytes
+        while True:
+            try:
+                raw = await self.ws.receive()
+            except WebSocketDisconnect:
+                return
+            if raw["type"] == "websocket.disconnect":
+                return
+            size = len(raw.get("text") or "") + len(raw.get("bytes") or b"")
+            if size > limit:
+                await self._close(CLOSE_TOO_BIG, "too_large", f"message over {limit} bytes")
+                return
+            try:
+                msg = parse_message(raw)
+            except BadRequestError as err:
+                await self._close(CLOSE_BAD_MESSAGE, "bad_message", str(err), err.field)
+                return
+            try:
+                await self._handle(msg, driver)
+            except DiathermyError as err:
+                _, code, field = classify(err)
+                await self.send(
+                    {"type": "error", "error": code, "message": str(err), "field": field}
+                )
+
+    async def _close(self, code: int, error: str, message: str, field: str | None = None) -> None:
+        with contextlib.suppress(Exception):
+            await self.send({"type": "error", "error": error, "message": message, "field": field})
+        if self._sender_task is not None:
+            await self._flush(self._sender_task)
+            self._sender_task.cancel()
+        if self.ws.client_state != WebSocketState.DISCONNECTED:
+            with contextlib.suppress(Exception):
+                await self.ws.close(code=code, reason=close_reason(error, message, field))
+
+    async def _ack(self, of: str, driver: SessionDriver, tag: Any = None) -> None:
+        await self.send(
+            {
+                "type": "ack",
+                "of": of,
+                "control_id": self.rec.control_id,
+                "tag": tag,
+                "running": driver.running,
+                "rate_hz": driver.rate_hz,
+            }
+        )
+
+    async def _handle(self, msg: Any, driver: SessionDriver) -> None:
+        if isinstance(msg, Subscribe):
+            await self._subscribe(msg)
+            await self._ack("subscribe", driver)
+        elif isinstance(msg, ElectrodeControl):
+            update = ElectrodeUpdate(
+                **msg.model_dump(exclude={"type", "name", "tag"}, exclude_none=True)
+            )
+            await update_electrode(
+                registry=self.state.registry, rec=self.rec, name=msg.name, update=update
+            )
+            await self._ack("electrode", driver, msg.tag)
+        elif isinstance(msg, Run):
+            driver.run(msg.rate_hz)
+            await self._ack("run", driver)
+        elif isinstance(msg, Pause):
+            driver.pause()
+            await self._ack("pause", driver)
+        elif isinstance(msg, Step):
+            driver.step(msg.n)
+            await self._ack("step", driver)
+
+    async def _subscribe(self, msg: Subscribe) -> None:
+        sub = Subscription(
+            fields=tuple(dict.fromkeys(msg.fields)),
+            every=msg.every,
+            dtype=msg.dtype,
+            region=msg.region,
+        )
+
+        def check_and_publish(sim: Any) -> None:
+            available = list(sim.field_names())
+            for i, name in enumerate(sub.fields):
+                if name not in available:
+                    raise BadRequestError(
+                        f"unknown field {name!r}; available: {', '.join(available)}",
+                        field=f"fields.{i}",
+                    )
+                if sub.region == "surface" and sim.field(name).ndim == 1:
+                    raise BadRequestError(
+                        f"{name!r} is per-element; the surface region carries nodal fields only",
+                        field=f"fields.{i}",
+                    )
+            self.sub.subscription = sub
+            self.rec.hub.publish(
+                sim, session_id=self.rec.id, control_id=self.rec.control_id, only=self.sub
+            )
+
+        await run_locked(self.rec, self.state.registry, check_and_publish)
+
+
+async def serve_stream(ws: WebSocket, state: AppState, session_id: str) -> None:
+    """Authenticate (Authorization header or ?token=), find the session, then serve the stream."""
+    await ws.accept()
+    header = ws.headers.get("authorization")
+    token = ws.query_params.get("token")
+    if header is None and token:
+        header = f"Bearer {token}"
+    try:
+        owner = state.tokens.owner(header)
+        rec = state.registry.get(owner, session_id)
+    except DiathermyError as err:
+        status, code, field = classify(err)
+        close = CLOSE_UNAUTHORIZED if status == 401 else CLOSE_NOT_FOUND
+        await ws.close(code=close, reason=close_reason(code, str(err), field))
+        return
+    conn = StreamConnection(ws, rec, state)
+    try:
+        await conn.serve()
+    except WebSocketDisconnect:
+        pass
+    except DiathermyError as err:  # e.g. a checkpoint that cannot be loaded
+        _, code, field = classify(err)
+        await conn._close(1011, code, str(err), field)
