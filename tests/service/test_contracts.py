@@ -7,9 +7,9 @@ import subprocess
 import sys
 from pathlib import Path
 
+from diathermy.service.engine import DefaultEngine
 from diathermy.service.openapi import contract_files
 from tests.service.conftest import TOKEN_A, LiveServer, make_settings
-from diathermy.service.engine import DefaultEngine
 
 ROOT = Path(__file__).resolve().parents[2]
 

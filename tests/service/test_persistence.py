@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from diathermy.service.encoding import decode_array, unpack
-from tests.service.conftest import SMALL, TOKEN_B, LiveServer, make_settings
 from diathermy.service.engine import DefaultEngine
+from tests.service.conftest import SMALL, TOKEN_B, LiveServer, make_settings
 
 
 def temperature(api, sid: str) -> np.ndarray:  # noqa: ANN001

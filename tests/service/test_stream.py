@@ -16,8 +16,8 @@ from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import ClientConnection, connect
 
 from diathermy.service.encoding import decode_array, pack, unpack
-from tests.service.conftest import SMALL, TOKEN_A, TOKEN_B, LiveServer, make_settings
 from diathermy.service.engine import DefaultEngine
+from tests.service.conftest import SMALL, TOKEN_A, TOKEN_B, LiveServer, make_settings
 from tests.service.rawws import RawWebSocket
 
 
