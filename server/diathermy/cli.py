@@ -136,6 +136,9 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("schema", help="print the scene JSON Schema")
     s.add_argument("--out", help="write to this file instead of stdout")
     s.set_defaults(func=_cmd_schema)
+    from diathermy.datagen.cli import add_datagen_parser
+
+    add_datagen_parser(sub)
     return p
 
 
