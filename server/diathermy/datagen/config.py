@@ -89,6 +89,8 @@ def _format_error(err: ValidationError) -> str:
     first = err.errors()[0]
     loc = ".".join(str(p) for p in first["loc"])
     msg = first["msg"].removeprefix("Value error, ")
+    if not loc and ": " in msg:  # model-level checks name their field first
+        loc, msg = msg.split(": ", 1)
     if not loc:
         return f"datagen config: {msg}"
     return f"datagen config: field '{loc}': {msg}"

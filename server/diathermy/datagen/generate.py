@@ -148,8 +148,8 @@ def generate(
     workers = workers or config.workers
     if engine not in ENGINES:
         raise ValueError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
-    factory = factory or default_physics_factory()
     writer = DatasetWriter(out, config, resume=resume)
+    factory = factory or default_physics_factory()
     shard_dir = shard_dir_for(out)
     first = writer.complete_scenarios
     ready = _prepare_shards(shard_dir, config, first)

@@ -196,7 +196,7 @@ class DatasetWriter:
             rows = int(f.attrs["complete_rows"])
             for name in (*FIELDS, *INDEX):  # drop a torn tail of an interrupted append
                 f[name].resize(rows, axis=0)
-            f.attrs["n_scenarios"] = self.config.n_scenarios
+            f.attrs.update(n_scenarios=self.config.n_scenarios, config=self.config.data_json())
         self.complete_scenarios = done
 
     def append_shard(self, shard: Path) -> None:
