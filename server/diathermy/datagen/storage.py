@@ -142,9 +142,9 @@ def _append_rows(f: h5py.File, samples: Iterable[Sample], config: DatagenConfig)
         for name, v in values.items():
             f[name].resize(row + n + 1, axis=0)
             f[name][row + n] = v
-        for name, v in zip(INDEX, (s.scenario, s.step, s.move.tet, s.move.parent), strict=True):
+        for name, k in zip(INDEX, (s.scenario, s.step, s.move.tet, s.move.parent), strict=True):
             f[name].resize(row + n + 1, axis=0)
-            f[name][row + n] = v
+            f[name][row + n] = k
         n += 1
     return n
 
