@@ -37,7 +37,9 @@ def bytes_per_sample(path: Path) -> float:
     """Stored (compressed) bytes of the sample fields per sample."""
     with h5py.File(path, "r") as f:
         n = int(f.attrs["complete_rows"])
-        total = sum(f[name].id.get_storage_size() for name in ("pressure", "level_set", "displacement"))
+        total = sum(
+            f[name].id.get_storage_size() for name in ("pressure", "level_set", "displacement")
+        )
     return total / n
 
 
@@ -70,7 +72,11 @@ def measure(grid: tuple[int, int, int], scenarios: int, steps: int, repeat: int)
     with tempfile.TemporaryDirectory() as tmp:
         generate(config.model_copy(update={"n_scenarios": 1}), Path(tmp) / "b.h5")
         row["bytes"] = bytes_per_sample(Path(tmp) / "b.h5")
-    for name, engine, workers in (("local1", "local", 1), ("local2", "local", 2), ("dask2", "dask", 2)):
+    for name, engine, workers in (
+        ("local1", "local", 1),
+        ("local2", "local", 2),
+        ("dask2", "dask", 2),
+    ):
         row[name] = run_engine(config, engine, workers, repeat)
         print(f"  {grid} {name}: {row[name]:.2f} samples/s", flush=True)
     return row
