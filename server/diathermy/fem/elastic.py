@@ -1,0 +1,170 @@
+"""Vectorised P1 linear elasticity: element stiffness, BSR assembly, eigenstress load, strain.
+
+Degrees of freedom are node-major: DOF ``3 * node + i`` is component i (x, y, z) of a node, so
+the stiffness matrix is a (3 n_nodes)^2 BSR matrix of 3x3 blocks on the node pattern of
+``fem.sparsity``. Young's modulus is per tet (cut tissue takes an ersatz modulus), Poisson's ratio
+one number for the mesh.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from diathermy.fem.geometry import ElementGeometry
+from diathermy.fem.sparsity import Pattern
+
+
+def lame_parameters(youngs_modulus: np.ndarray | float, nu: float) -> tuple:
+    """Lame's lambda = E nu / ((1 + nu)(1 - 2 nu)) and mu = E / (2 (1 + nu)), in Pa."""
+    if not -1.0 < nu < 0.5:
+        raise ValueError(f"Poisson's ratio must lie in (-1, 0.5), got {nu}")
+    E = np.asarray(youngs_modulus, dtype=float)
+    return E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)), E / (2.0 * (1.0 + nu))
+
+
+def elastic_local(
+    geom: ElementGeometry, youngs_modulus: np.ndarray | float, nu: float
+) -> np.ndarray:
+    """Element stiffness (n_tets, 4, 4, 3, 3): entry [e, a, b, i, j] couples DOF (a, i) to (b, j).
+
+    Lame form of int lambda div u div v + 2 mu eps(u) : eps(v) for u = N_b e_j, v = N_a e_i:
+    |T| (lambda g_ai g_bj + mu g_aj g_bi + mu delta_ij g_a . g_b).
+    """
+    lam, mu = lame_parameters(np.broadcast_to(youngs_modulus, geom.volumes.shape), nu)
+    g = geom.grads
+    wl, wm = (lam * geom.volumes)[:, None, None, None, None], (mu * geom.volumes)
+    K = wl * np.einsum("eai,ebj->eabij", g, g)
+    K += wm[:, None, None, None, None] * np.einsum("eaj,ebi->eabij", g, g)
+    K += (wm[:, None, None] * np.einsum("eak,ebk->eab", g, g))[..., None, None] * np.eye(3)
+    return K
+
+
+@dataclass(frozen=True)
+class ElasticAssembler:
+    """Assembles the stiffness of one mesh for any per-tet E: built once per mesh.
+
+    On a uniform Kuhn mesh (``shape_id`` given) every element matrix is E_e K_ref[shape_e], so the
+    BSR data is one sparse product ``gather @ K_ref``: ``gather`` (n_blocks, 6*16) holds E of the
+    tet that puts combination (shape, a, b) into each block. Elsewhere it is 9 bincounts of the
+    element matrices over the pattern's slots (memory 16x9 floats per tet: small meshes only).
+    """
+
+    pattern: Pattern
+    geom: ElementGeometry
+    shape_id: np.ndarray | None = None
+    gather: sp.csr_matrix | None = None
+    gather_tet: np.ndarray | None = None  # tet of each stored entry of ``gather``
+    reference_tets: np.ndarray | None = None  # (6,) one tet of each Kuhn shape
+
+    def stiffness(self, youngs_modulus: np.ndarray | float, nu: float) -> sp.bsr_matrix:
+        """Stiffness matrix (3 n_nodes, 3 n_nodes) as BSR 3x3 blocks; E per tet in Pa."""
+        n_tets = self.geom.volumes.shape[0]
+        E = np.ascontiguousarray(np.broadcast_to(np.asarray(youngs_modulus, float), (n_tets,)))
+        if self.gather is not None:
+            assert self.reference_tets is not None and self.gather_tet is not None
+            ref = self.reference_tets
+            g = ElementGeometry(self.geom.grads[ref], self.geom.volumes[ref])
+            K_ref = elastic_local(g, 1.0, nu).reshape(ref.size * 16, 9)
+            np.take(E, self.gather_tet, out=self.gather.data)
+            data = self.gather @ K_ref
+        else:
+            K = elastic_local(self.geom, E, nu).reshape(n_tets * 16, 9)
+            slot = self.pattern.slot.ravel()
+            data = np.column_stack(
+                [np.bincount(slot, K[:, c], minlength=self.pattern.nnz) for c in range(9)]
+            )
+        n = 3 * self.pattern.n
+        return sp.bsr_matrix(
+            (data.reshape(-1, 3, 3), self.pattern.indices, self.pattern.indptr), shape=(n, n)
+        )
+
+
+def elastic_assembler(
+    pattern: Pattern, geom: ElementGeometry, shape_id: np.ndarray | None = None
+) -> ElasticAssembler:
+    """Precompute the assembly of ``pattern``; pass the mesh's ``shape_id`` on a Kuhn mesh.
+
+    With ``shape_id`` the tets of one shape must be translates of each other (``TetMesh``
+    guarantees it), since their element matrices are taken from one reference tet.
+    """
+    if shape_id is None:
+        return ElasticAssembler(pattern, geom)
+    sid = np.asarray(shape_id, dtype=np.intp)
+    shapes = np.unique(sid)
+    order = np.argsort(sid, kind="stable")
+    counts = np.bincount(sid)[shapes]
+    starts = np.concatenate([[0], np.cumsum(counts)])
+    # CSC by combination (shape, a, b): within one column no two tets share a block.
+    rows, tet_of = [], []
+    for s in range(shapes.size):
+        tets_s = order[starts[s] : starts[s + 1]]
+        rows.append(pattern.slot[tets_s].reshape(-1, 16).T.ravel())
+        tet_of.append(np.tile(tets_s, 16))
+    col_ptr = np.concatenate([[0], np.cumsum(np.repeat(counts, 16))])
+    index_type = np.int32 if pattern.nnz < 2**31 and sid.size < 2**31 else np.int64
+    entry = np.arange(col_ptr[-1], dtype=np.int64)
+    csc = sp.csc_matrix(
+        (entry, np.concatenate(rows).astype(index_type), col_ptr),
+        shape=(pattern.nnz, 16 * shapes.size),
+    )
+    del rows
+    csr = csc.tocsr()  # counting sort by block: linear time
+    gather_tet = np.concatenate(tet_of).astype(index_type)[csr.data]
+    gather = sp.csr_matrix((np.zeros(csr.nnz), csr.indices, csr.indptr), shape=csr.shape)
+    reference_tets = order[starts[:-1]]
+    return ElasticAssembler(pattern, geom, sid, gather, gather_tet, reference_tets)
+
+
+def eigenstress_load(
+    geom: ElementGeometry,
+    tets: np.ndarray,
+    n_nodes: int,
+    pressure_excess_pa: np.ndarray,
+    tet_weight: np.ndarray | None = None,
+) -> np.ndarray:
+    """Nodal force (n_nodes, 3) in N of an isotropic eigenstress: int (p - p0) div v.
+
+    ``pressure_excess_pa`` is the nodal p - p0 (n_nodes,); P1 integrated exactly against the
+    constant div v of a tet: |T| mean_T(p - p0) grad N_a. ``tet_weight`` (n_tets,) scales the
+    eigenstress per tet (0 where there is no tissue to carry a pore pressure).
+    """
+    q = geom.volumes * np.asarray(pressure_excess_pa, dtype=float)[tets].mean(axis=1)
+    if tet_weight is not None:
+        q = q * tet_weight
+    idx = tets.ravel()
+    return np.column_stack(
+        [
+            np.bincount(idx, (q[:, None] * geom.grads[:, :, i]).ravel(), minlength=n_nodes)
+            for i in range(3)
+        ]
+    )
+
+
+def displacement_gradient(geom: ElementGeometry, tets: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Per-tet displacement gradient (n_tets, 3, 3), [e, i, k] = du_i / dx_k, of nodal u (n, 3)."""
+    return np.einsum("eai,eak->eik", u[tets], geom.grads)
+
+
+def strain(geom: ElementGeometry, tets: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Per-tet small strain (n_tets, 3, 3) of nodal displacements u (n_nodes, 3) in m."""
+    G = displacement_gradient(geom, tets, u)
+    return 0.5 * (G + np.swapaxes(G, 1, 2))
+
+
+def rigid_body_modes(points: np.ndarray) -> np.ndarray:
+    """The 6 rigid-body modes (3 n_nodes, 6): 3 translations, 3 rotations about the centroid.
+
+    Rotations are scaled by the body's size so all columns have comparable norms.
+    """
+    x = points - points.mean(axis=0)
+    x = x / max(float(np.abs(x).max()), np.finfo(float).tiny)
+    n = points.shape[0]
+    B = np.zeros((n, 3, 6))
+    B[:, 0, 0] = B[:, 1, 1] = B[:, 2, 2] = 1.0
+    B[:, 0, 3], B[:, 1, 3] = -x[:, 1], x[:, 0]  # about z
+    B[:, 1, 4], B[:, 2, 4] = -x[:, 2], x[:, 1]  # about x
+    B[:, 2, 5], B[:, 0, 5] = -x[:, 0], x[:, 2]  # about y
+    return B.reshape(3 * n, 6)
