@@ -23,13 +23,9 @@ from diathermy.physics.levelset import (
     reinitialize,
     tet_to_node,
 )
-from diathermy.physics.mechanics import DEFAULT_AMG_OPTIONS, MechanicsSolver, mechanics_assembler
+from diathermy.physics.mechanics import MechanicsSolver, mechanics_assembler
 from diathermy.physics.strain_energy import strain_energy_density
 from diathermy.physics.topology import loose_fragments, removed_fraction, removed_tets
-
-# pyamg's default coarse solver (dense pinv) cost 2-50 s per hierarchy here; splu 0.05 s, same
-# iterations. Datagen rebuilds the hierarchy at every change of the cut, so it matters most here.
-AMG_OPTIONS = {**DEFAULT_AMG_OPTIONS, "coarse_solver": "splu"}
 
 
 @lru_cache(maxsize=2)
@@ -80,7 +76,6 @@ class FemPhysics:
                 ersatz_ratio=m.ersatz_stiffness_ratio,
                 rtol=self.config.mechanics_rtol,
                 assembler=self.assembler,
-                amg_options=AMG_OPTIONS,
             )
         return self._solver[key]
 

@@ -13,6 +13,7 @@ from diathermy.datagen.pressure import nodal_pressure
 from diathermy.datagen.walk import (
     Move,
     draw_pressure,
+    legacy_numpy_seed,
     next_move,
     perturb,
     scenario_rng,
@@ -69,7 +70,14 @@ def scenario_start(config: DatagenConfig, mesh: TetMesh, index: int) -> int:
 
 
 def run_scenario(config: DatagenConfig, index: int, physics: ScenarioPhysics) -> Iterator[Sample]:
-    """Yield the ``config.n_steps`` samples of scenario ``index`` (Algorithm 1)."""
+    """Yield the ``config.n_steps`` samples of scenario ``index`` (Algorithm 1).
+
+    pyamg draws the start vectors of its spectral-radius estimates from numpy's global RNG, so
+    the AMG hierarchies (and the last bits of every solve) depend on it: it is seeded from
+    (seed, index) here, so a scenario gives the same bits in any process and after any other
+    scenario. Do not interleave two of these generators in one process.
+    """
+    np.random.seed(legacy_numpy_seed(config.seed, index))  # noqa: NPY002
     mesh = physics.mesh
     rng = scenario_rng(config.seed, index)
     lo, hi, p0 = config.p_min_pa, config.p_max_pa, config.material.p_atm_pa

@@ -32,6 +32,11 @@ def scenario_rng(seed: int, index: int) -> random.Random:
     return random.Random(f"{_KEY}:{seed}:scenario:{index}")
 
 
+def legacy_numpy_seed(seed: int, index: int) -> int:
+    """A 32-bit seed for numpy's global RNG in scenario ``index`` (see ``run_scenario``)."""
+    return random.Random(f"{_KEY}:{seed}:numpy:{index}").getrandbits(32)
+
+
 def surface_tets(mesh: TetMesh) -> np.ndarray:
     """Sorted indices of the tets with a face on the top side ``z+``."""
     k, _, _ = mesh.grid.grid_index(mesh.tets)
