@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Literal
 
 import h5py
+from threadpoolctl import threadpool_limits
 
 from diathermy.datagen.config import DatagenConfig
 from diathermy.datagen.scenario import PhysicsFactory, run_scenario
@@ -64,9 +65,12 @@ def shard_path(shard_dir: Path, index: int) -> Path:
 def compute_shard(config_json: str, index: int, shard_dir: str, factory: PhysicsFactory) -> str:
     """Worker task: run scenario ``index`` and write its shard; returns the shard path."""
     config = DatagenConfig.model_validate_json(config_json)
-    physics = factory(config)
     path = shard_path(Path(shard_dir), index)
-    write_shard(path, config, index, run_scenario(config, index, physics))
+    # Parallelism is over scenarios: BLAS threads only oversubscribe the cores (measured 1.5-3x
+    # slower at 17x17x33 with OpenBLAS's default threads, benchmarks/datagen.py).
+    with threadpool_limits(limits=1):
+        physics = factory(config)
+        write_shard(path, config, index, run_scenario(config, index, physics))
     return str(path)
 
 
