@@ -149,6 +149,9 @@ def build_parser() -> argparse.ArgumentParser:
     from diathermy.datagen.cli import add_datagen_parser
 
     add_datagen_parser(sub)
+    from diathermy.report.cli import add_report_parser
+
+    add_report_parser(sub)
     return p
 
 

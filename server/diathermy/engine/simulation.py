@@ -59,6 +59,7 @@ from diathermy.physics.tissue_effects import (
     electrical_conductivity,
 )
 from diathermy.physics.topology import Topology, contact_height, evaluate_topology
+from diathermy.report.budget import resolve_accuracy_budget
 from diathermy.scene import Scene
 
 if TYPE_CHECKING:
@@ -69,6 +70,7 @@ class Simulation:
     """State and stepping of one scene. Not thread-safe: one caller steps it at a time."""
 
     def __init__(self, scene: Scene, *, mechanics_backend: MechanicsBackend | None = None) -> None:
+        scene = resolve_accuracy_budget(scene)
         self.scene = scene
         self.tissue = scene.material
         self.effects: tuple[str, ...] = scene.closed_effects

@@ -4,6 +4,7 @@ from diathermy.scene.builtin import builtin_scene, builtin_scene_names
 from diathermy.scene.io import load_scene, scene_from_dict, scene_json_schema
 from diathermy.scene.models import (
     EFFECTS,
+    AccuracyBudget,
     Electrode,
     ElectrodePath,
     LevelSetConfig,
@@ -15,6 +16,7 @@ from diathermy.scene.models import (
 
 __all__ = [
     "EFFECTS",
+    "AccuracyBudget",
     "Electrode",
     "ElectrodePath",
     "LevelSetConfig",

@@ -125,6 +125,14 @@ class LevelSetConfig(_Model):
     cfl: Annotated[float, Field(gt=0, le=1)] = 0.5
 
 
+class AccuracyBudget(_Model):
+    """The largest error a user accepts; the engine picks the cheapest measured variant meeting it."""
+
+    max_strain_energy_error: Annotated[float, Field(gt=0, le=1)] = Field(
+        description="max relative strain-energy error over a run (the paper's metric), e.g. 0.02"
+    )
+
+
 class Scene(_Model):
     """Everything a simulation needs. Lengths in m, times in s."""
 
@@ -143,6 +151,7 @@ class Scene(_Model):
     solver: SolverConfig = SolverConfig()
     mechanics: MechanicsConfig = MechanicsConfig()
     level_set: LevelSetConfig = LevelSetConfig()
+    accuracy_budget: AccuracyBudget | None = None
 
     @field_validator("grid")
     @classmethod

@@ -1,0 +1,83 @@
+"""Variants of how a scene can be run, and what running one measures.
+
+A variant changes only the knobs that trade accuracy for time (mechanics backend and tolerance,
+grid, surrogate model, guard); everything else comes from the scene.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import asdict, dataclass
+from typing import Literal
+
+from diathermy.scene import Scene, scene_from_dict
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One way to run a scene. ``model`` is a surrogate file for the cnn/pgd backends."""
+
+    name: str
+    backend: Literal["fem", "cnn", "pgd"] = "fem"
+    rtol: float = 1e-6
+    grid: tuple[int, int, int] | None = None  # None: the scene's grid
+    model: str | None = None
+    guard_tolerance: float | None = None
+
+    def apply(self, scene: Scene, steps: int) -> Scene:
+        """The scene as this variant runs it."""
+        data = scene.model_dump()
+        data["steps"] = steps
+        if self.grid is not None:
+            data["grid"] = list(self.grid)
+        data["mechanics"] = {
+            **data["mechanics"],
+            "backend": self.backend,
+            "rtol": self.rtol,
+            "model": self.model,
+            "guard_tolerance": self.guard_tolerance,
+        }
+        return scene_from_dict(data)
+
+    def key(self, scene: Scene, steps: int) -> str:
+        """A hash of everything that decides this variant's result (for resuming)."""
+        text = json.dumps(
+            [asdict(self), self.apply(scene, steps).model_dump(mode="json")], sort_keys=True
+        )
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def reference_for(variant: Variant) -> Variant:
+    """The FEM run at tight tolerance on the same grid, which the variant is measured against."""
+    return Variant(
+        name=f"reference-fem-{_grid_name(variant.grid)}",
+        backend="fem",
+        rtol=1e-10,
+        grid=variant.grid,
+    )
+
+
+def _grid_name(grid: tuple[int, int, int] | None) -> str:
+    return "scene-grid" if grid is None else "x".join(str(n) for n in grid)
+
+
+def default_variants(models: dict[str, str] | None = None) -> list[Variant]:
+    """FEM at three tolerances on the scene grid and a coarser grid, plus the surrogates given.
+
+    ``models`` maps variant names to model files, e.g. {"cnn-w16": "model.pt", "pgd-15": "pgd.npz"};
+    a name starting with "cnn" runs the CNN backend (also with the guard), "pgd" the PGD one.
+    """
+    out = [
+        Variant("fem-rtol1e-4", rtol=1e-4),
+        Variant("fem-rtol1e-6", rtol=1e-6),
+        Variant("fem-rtol1e-8", rtol=1e-8),
+        Variant("fem-coarse-rtol1e-6", rtol=1e-6, grid=(9, 9, 17)),
+    ]
+    for name, path in (models or {}).items():
+        if name.startswith("cnn"):
+            out.append(Variant(name, backend="cnn", model=path))
+            out.append(Variant(f"{name}+guard", backend="cnn", model=path, guard_tolerance=1e-3))
+        elif name.startswith("pgd"):
+            out.append(Variant(name, backend="pgd", model=path))
+    return out

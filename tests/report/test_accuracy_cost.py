@@ -1,0 +1,84 @@
+"""A tiny accuracy-cost report end to end: its table agrees with the run files it came from."""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import asdict
+
+import numpy as np
+import pytest
+
+from diathermy.errors import SceneError
+from diathermy.physics.strain_energy import relative_strain_energy_error
+from diathermy.report.accuracy_cost import accuracy_cost_report
+from diathermy.report.budget import cheapest_within, resolve_accuracy_budget
+from diathermy.report.measure import load_fields
+from diathermy.report.variants import Variant
+from diathermy.scene import AccuracyBudget
+from tests.engine.scenes import tiny_scene
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    out = tmp_path_factory.mktemp("acc")
+    scene = tiny_scene()
+    variants = [Variant("fem-rtol1e-2", rtol=1e-2), Variant("fem-rtol1e-6", rtol=1e-6)]
+    rows = accuracy_cost_report([scene], variants, steps=20, out=out, progress=False)
+    return scene, rows, out
+
+
+def test_table_matches_run_files(report):
+    scene, rows, out = report
+    assert [r.variant for r in rows] == ["fem-rtol1e-2", "fem-rtol1e-6"]
+    runs = {p.name.split("--")[1]: p for p in (out / "runs").glob("*.h5")}
+    W_ref, _ = load_fields(runs["reference-fem-scene-grid"])
+    for row in rows:
+        assert row.failed is None
+        W, _ = load_fields(runs[row.variant])
+        errs = [
+            relative_strain_energy_error(W[i].astype(float), W_ref[i].astype(float))
+            for i in range(W.shape[0])
+            if W_ref[i].any()
+        ]
+        assert errs, "the tiny scene must reach the mechanics"
+        assert row.se_error_max == pytest.approx(max(errs))
+        assert row.se_error_mean == pytest.approx(np.mean(errs))
+        rec = json.loads((runs[row.variant].with_suffix(".json")).read_text())
+        assert row.step_median_s == pytest.approx(np.median(rec["step_s"]))
+    loose, tight = rows
+    assert loose.se_error_max > tight.se_error_max  # a looser tolerance costs accuracy
+    with open(out / "report.csv") as f:
+        assert len(list(csv.DictReader(f))) == 2
+    assert (out / "report.md").read_text().count("| tiny |") == 2
+    assert (out / "error_vs_cost.png").stat().st_size > 0 and (out / "error_vs_time.png").exists()
+
+
+def test_resume_does_not_rerun(report):
+    scene, rows, out = report
+    before = {p: p.stat().st_mtime_ns for p in (out / "runs").glob("*.h5")}
+    again = accuracy_cost_report(
+        [scene], [Variant("fem-rtol1e-6", rtol=1e-6)], steps=20, out=out, progress=False
+    )
+    assert again[0].se_error_max == rows[1].se_error_max
+    assert {p: p.stat().st_mtime_ns for p in (out / "runs").glob("*.h5")} == before
+
+
+def test_accuracy_budget_picks_cheapest_meeting_it(report, monkeypatch, tmp_path):
+    scene, rows, out = report
+    data = {"rows": [asdict(r) for r in rows]}
+    (tmp_path / "report.json").write_text(json.dumps(data))
+    loose, tight = rows
+    budget = (loose.se_error_max + tight.se_error_max) / 2
+    pick = cheapest_within(data, scene="tiny", max_strain_energy_error=budget)
+    assert pick["variant"] == "fem-rtol1e-6"
+    pick = cheapest_within(data, scene="tiny", max_strain_energy_error=1.0)
+    assert pick["step_median_s"] == min(r.step_median_s for r in rows if r.se_error_max <= 1.0)
+    with pytest.raises(SceneError, match="no measured variant"):
+        cheapest_within(data, scene="tiny", max_strain_energy_error=tight.se_error_max / 10)
+    budgeted = tiny_scene(accuracy_budget=AccuracyBudget(max_strain_energy_error=budget))
+    resolved = resolve_accuracy_budget(budgeted, tmp_path / "report.json")
+    assert resolved.mechanics.rtol == 1e-6 and resolved.accuracy_budget is None
+    monkeypatch.setenv("DIATHERMY_ACCURACY_REPORT", str(out / "missing.json"))
+    with pytest.raises(SceneError, match="cannot be read"):
+        resolve_accuracy_budget(budgeted)
