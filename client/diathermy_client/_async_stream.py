@@ -65,6 +65,8 @@ class AsyncStream:
         self._reader: asyncio.Task[None] | None = None
         self._closing = False
         self._opened = False
+        self._dead = False  # the stream ended for good (a final close, or reconnects gave up)
+        self._connected = asyncio.Event()  # clear while reconnecting: controls wait for it
         self.dropped_locally = 0
         """Frames discarded here because the consumer fell ``buffer`` frames behind."""
 
@@ -196,6 +198,7 @@ class AsyncStream:
         if not isinstance(first, Hello):
             raise ServerError(f"expected hello, got {first!r}")
         self._ws = ws
+        self._connected.set()
         futs = []
         for msg in self._sc.on_connected(first, reconnect=reconnect):
             fut: asyncio.Future[Ack] = asyncio.get_running_loop().create_future()
@@ -209,23 +212,37 @@ class AsyncStream:
     async def _control(self, msg: dict[str, Any]) -> Ack:
         if not self._opened:
             await self.open()
-        if self._closing or self._ws is None:
-            raise StreamClosed("the stream is closed")
-        fut: asyncio.Future[Ack] = asyncio.get_running_loop().create_future()
-        self._pending.append(fut)
-        self._sc.sent(msg)
-        try:
-            await self._ws.send(json.dumps(msg))
-        except ConnectionClosed as err:
-            self._pending.remove(fut)
-            raise StreamClosed(f"connection lost while sending {msg['type']}") from err
-        return await self._wait(fut)
+        for attempt in range(2):  # a send that hit a dropped socket was not delivered: resend
+            if not self._connected.is_set() and not self._dead:  # reconnecting: wait for it
+                with contextlib.suppress(asyncio.TimeoutError):
+                    await asyncio.wait_for(self._connected.wait(), self._timeout_s)
+            ws = self._ws
+            if self._closing or self._dead or ws is None or not self._connected.is_set():
+                raise StreamClosed("the stream is closed")
+            fut: asyncio.Future[Ack] = asyncio.get_running_loop().create_future()
+            self._pending.append(fut)
+            try:
+                await ws.send(json.dumps(msg))
+            except ConnectionClosed as err:
+                self._pending.remove(fut)
+                if attempt:
+                    raise StreamClosed(f"connection lost while sending {msg['type']}") from err
+                if self._ws is ws:
+                    self._connected.clear()  # the reader reconnects
+                continue
+            self._sc.sent(msg)
+            return await self._wait(fut)
+        raise AssertionError("unreachable")
 
     async def _wait(self, fut: asyncio.Future[Ack]) -> Ack:
         try:
             return await asyncio.wait_for(asyncio.shield(fut), self._timeout_s)
         except asyncio.TimeoutError:
             raise Timeout(f"no answer from the stream within {self._timeout_s} s") from None
+
+    def _end(self) -> None:
+        self._dead = True
+        self._connected.set()  # wake controls waiting for a reconnect: they raise StreamClosed
 
     def _push(self, item: Any) -> None:
         if isinstance(item, Frame):
@@ -262,14 +279,17 @@ class AsyncStream:
             except ConnectionClosed as err:
                 if self._closing:
                     return
+                self._connected.clear()
                 code, reason = _close_of(err)
                 final = self._sc.close_error(code, reason)
                 if final is not None or self._reconnect is None:
                     self._fail_pending(final or self._sc.closed_error(code, reason, "dropped"))
                     self._push(final or self._sc.closed_error(code, reason, "dropped"))
+                    self._end()
                     return
                 self._fail_pending(self._sc.closed_error(code, reason, "reconnecting"))
                 if not await self._reconnect_loop(code, reason):
+                    self._end()
                     return
                 continue
             try:

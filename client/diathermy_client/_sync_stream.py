@@ -69,6 +69,8 @@ class Stream:
         self._reader: threading.Thread | None = None
         self._closing = False
         self._opened = False
+        self._dead = False  # the stream ended for good (a final close, or reconnects gave up)
+        self._connected = threading.Event()  # clear while reconnecting: controls wait for it
         self.dropped_locally = 0
         """Frames discarded here because the consumer fell ``buffer`` frames behind."""
 
@@ -185,12 +187,14 @@ class Stream:
     # --- internals
     def _connect(self) -> ClientConnection:
         try:
-            return connect(
+            ws = connect(
                 self._sc.url,
                 additional_headers=self._sc.headers,
                 open_timeout=self._timeout_s,
                 max_size=None,
             )
+            # entering marks it as managed (websockets >= 17.1 warns otherwise); close() ends it
+            return ws.__enter__()
         except (OSError, InvalidHandshake, InvalidURI, TimeoutError) as err:
             raise StreamClosed(f"cannot connect to {self._sc.url}: {err}") from err
 
@@ -208,6 +212,7 @@ class Stream:
         if not isinstance(first, Hello):
             raise ServerError(f"expected hello, got {first!r}")
         self._ws = ws
+        self._connected.set()
         futs = []
         for msg in self._sc.on_connected(first, reconnect=reconnect):
             fut: Future[Ack] = Future()
@@ -220,23 +225,39 @@ class Stream:
     def _control(self, msg: dict[str, Any]) -> Ack:
         if not self._opened:
             self.open()
-        if self._closing or self._ws is None:
-            raise StreamClosed("the stream is closed")
-        fut: Future[Ack] = Future()
-        try:
-            with self._send_lock:  # pending order must match send order
-                self._pending.append(fut)
-                self._sc.sent(msg)
-                self._ws.send(json.dumps(msg))
-        except ConnectionClosed as err:
-            raise StreamClosed(f"connection lost while sending {msg['type']}") from err
-        return self._wait(fut)
+        for attempt in range(2):  # a send that hit a dropped socket was not delivered: resend
+            if not self._connected.is_set() and not self._dead:  # reconnecting: wait for it
+                self._connected.wait(self._timeout_s)
+            ws = self._ws
+            if self._closing or self._dead or ws is None or not self._connected.is_set():
+                raise StreamClosed("the stream is closed")
+            fut: Future[Ack] = Future()
+            try:
+                with self._send_lock:  # pending order must match send order
+                    self._pending.append(fut)
+                    ws.send(json.dumps(msg))
+            except ConnectionClosed as err:
+                with self._send_lock:
+                    if fut in self._pending:
+                        self._pending.remove(fut)
+                if attempt:
+                    raise StreamClosed(f"connection lost while sending {msg['type']}") from err
+                if self._ws is ws:
+                    self._connected.clear()  # the reader reconnects
+                continue
+            self._sc.sent(msg)
+            return self._wait(fut)
+        raise AssertionError("unreachable")
 
     def _wait(self, fut: Future[Ack]) -> Ack:
         try:
             return fut.result(timeout=self._timeout_s)
         except FutureTimeout:
             raise Timeout(f"no answer from the stream within {self._timeout_s} s") from None
+
+    def _end(self) -> None:
+        self._dead = True
+        self._connected.set()  # wake controls waiting for a reconnect: they raise StreamClosed
 
     def _push(self, item: Any) -> None:
         with self._cond:
@@ -276,15 +297,18 @@ class Stream:
             except ConnectionClosed as err:
                 if self._closing:
                     return
+                self._connected.clear()
                 code, reason = _close_of(err)
                 final = self._sc.close_error(code, reason)
                 if final is not None or self._reconnect is None:
                     end = final or self._sc.closed_error(code, reason, "dropped")
                     self._fail_pending(end)
                     self._push(end)
+                    self._end()
                     return
                 self._fail_pending(self._sc.closed_error(code, reason, "reconnecting"))
                 if not self._reconnect_loop(code, reason):
+                    self._end()
                     return
                 continue
             try:
