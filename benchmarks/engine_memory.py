@@ -4,7 +4,7 @@
 
 Two scenes per grid: electric + thermal only, and every default effect on a small hot block (so
 vaporization, mechanics and dissection all run within the first steps). Memory is the child's
-peak RSS (resource.getrusage) minus its RSS after imports. Fits bytes = base + per_node * nodes per
+peak RSS (VmHWM) minus its RSS after imports. Fits bytes = base + per_node * nodes per
 scene by least squares, compares with ``diathermy.engine.limits.estimate_memory_bytes`` and writes
 benchmarks/results/engine_memory.md.
 """
@@ -28,16 +28,20 @@ SCENES = {
 }
 
 
-def rss_now() -> int:
+def rss_now(key: str = "VmRSS:") -> int:
+    """Current (VmRSS) or peak (VmHWM) resident bytes of this process.
+
+    The peak is read here rather than from ``resource.getrusage``: Linux carries ``ru_maxrss``
+    across exec from a forked parent, so a child of a big process would report the parent's peak.
+    """
     for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
+        if line.startswith(key):
             return int(line.split()[1]) * 1024
-    raise RuntimeError("no VmRSS")
+    raise RuntimeError(f"no {key}")
 
 
 def child(shape: tuple[int, int, int], effects: list[str], steps: int) -> dict[str, float]:
     """Build and step one simulation; returns bytes above the post-import baseline."""
-    import resource
     import time
 
     from diathermy.engine.simulation import Simulation
@@ -57,7 +61,7 @@ def child(shape: tuple[int, int, int], effects: list[str], steps: int) -> dict[s
     t0 = time.perf_counter()
     sim = Simulation(scene)
     reports = sim.run(steps)
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    peak = rss_now("VmHWM:")
     return {
         "bytes": float(peak - base),
         "seconds": time.perf_counter() - t0,
