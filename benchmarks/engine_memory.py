@@ -112,7 +112,8 @@ def main() -> None:
         f"`python benchmarks/engine_memory.py --grids {' '.join('x'.join(map(str, g)) for g in grids)} "
         f"--steps {args.steps}`: each row is a fresh process that builds one simulation and takes "
         f"{args.steps} steps (2 x 1 x 1 cm block, 200 W, so every called effect runs); memory is "
-        "peak RSS minus RSS after imports. Shared 2-core machine.",
+        "peak RSS (VmHWM) minus RSS after imports. Shared 2-core machine. The estimate is "
+        "`diathermy.engine.limits.estimate_memory_bytes`, which the service checks grids with.",
         "",
         "| scene | grid | nodes | measured MiB | estimate MiB | estimate / measured | mechanics ran | s |",
         "|---|---|---:|---:|---:|---:|---|---:|",
