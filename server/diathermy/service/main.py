@@ -17,7 +17,7 @@ from diathermy.service.errors import install_error_handlers
 from diathermy.service.metrics import ServiceMetrics
 from diathermy.service.middleware import LimitAndLogMiddleware
 from diathermy.service.registry import SessionRegistry
-from diathermy.service.routes import fields, health, scenes, sessions, stream
+from diathermy.service.routes import fields, health, reports, scenes, sessions, stream
 from diathermy.service.sessions import save_dirty
 from diathermy.service.state import AppState
 from diathermy.version import __version__
@@ -75,6 +75,6 @@ def create_app(settings: Settings | None = None, *, engine: EngineAdapter | None
         LimitAndLogMiddleware, max_bytes=settings.max_request_bytes, metrics=state.metrics
     )
     install_error_handlers(app)
-    for module in (health, scenes, sessions, fields, stream):
+    for module in (health, scenes, sessions, fields, stream, reports):
         app.include_router(module.router)
     return app
