@@ -52,16 +52,17 @@ def _cmd_pgd_build(args: argparse.Namespace) -> int:
 
     cfg = read_config(args.config)
     scene = resolve_scene(cfg.get("scene"))
-    grid = tuple(int(v) for v in cfg.get("grid", scene.grid))
-    if len(grid) != 3 or min(grid) < 3:
-        raise SceneError(f"grid must be three node counts >= 3, got {grid}")
+    raw = [int(v) for v in cfg.get("grid", scene.grid)]
+    if len(raw) != 3 or min(raw) < 3:
+        raise SceneError(f"grid must be three node counts >= 3, got {raw}")
+    grid = (raw[0], raw[1], raw[2])
     manifold_data = dict(cfg["manifold"])
     if args.modes is not None:
         manifold_data["n_modes"] = args.modes
     manifold = TrainingManifold.from_dict(manifold_data)
     model = build_model(
         manifold,
-        grid,  # type: ignore[arg-type]
+        grid,
         tuple(scene.block_m),  # type: ignore[arg-type]
         scene.material,
         progress=None if args.quiet else print,

@@ -241,7 +241,7 @@ def save_model(model: PGDModel, path: str | Path) -> Path:
     }
     tmp = path.with_name(path.name + ".part")
     with tmp.open("wb") as fh:
-        np.savez_compressed(fh, **arrays)
+        np.savez_compressed(fh, **arrays)  # type: ignore[arg-type]
     tmp.replace(path)
     return path
 
@@ -286,11 +286,10 @@ def load_model(
     path = Path(path)
     meta, a = _read(path)
     try:
-        grid = tuple(int(v) for v in meta["grid_shape"])
-        block = tuple(float(v) for v in meta["block_m"])
+        gz, gy, gx = (int(v) for v in meta["grid_shape"])
+        bx, by, bz = (float(v) for v in meta["block_m"])
+        grid, block = (gz, gy, gx), (bx, by, bz)
         kp = meta["kpca"]
-        if len(grid) != 3 or len(block) != 3:
-            raise ValueError("grid_shape and block_m need three entries")
         topo = topology_map_from(
             a["kpca_features"], kp["band_m"], kp["gamma"], int(kp["n_components"])
         )
@@ -301,8 +300,8 @@ def load_model(
                 f"modes have {a['M'].shape[1]} DOFs, grid {grid} needs {3 * np.prod(grid)}"
             )
         model = PGDModel(
-            grid_shape=grid,  # type: ignore[arg-type]
-            block_m=block,  # type: ignore[arg-type]
+            grid_shape=grid,
+            block_m=block,
             material={k: float(v) for k, v in meta["material"].items()},
             s_x=a["s_x"],
             s_y=a["s_y"],

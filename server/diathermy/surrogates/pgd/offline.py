@@ -252,7 +252,7 @@ def build_model(
     progress: Callable[[str], None] | None = None,
 ) -> PGDModel:
     """FEM snapshots on the manifold, then the greedy PGD; the model of ``grid_shape``/``block_m``."""
-    grid = Grid(tuple(int(v) for v in grid_shape), size_m=tuple(float(v) for v in block_m))
+    grid = Grid(grid_shape, size_m=block_m)
     lo, hi = np.asarray(grid.origin_m), np.asarray(grid.origin_m) + np.asarray(grid.size_m)
     for name, vals, axis in (
         ("electrode_x_m", manifold.electrode_x_m, 0),
