@@ -142,6 +142,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_train_parser(sub)
     add_evaluate_parser(sub)
+    from diathermy.surrogates.pgd.cli import add_pgd_parser  # numpy/scipy only, no torch
+
+    add_pgd_parser(sub)
     from diathermy.service.cli import add_serve_parser  # FastAPI itself loads only when serving
 
     add_serve_parser(sub)

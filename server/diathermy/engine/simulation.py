@@ -609,6 +609,38 @@ def make_backend(sim: Simulation) -> MechanicsBackend:
             rtol=cfg.rtol,
             ersatz_ratio=sim.tissue.ersatz_stiffness_ratio,
         )
+    if cfg.backend == "pgd":
+        return _pgd_backend(sim)
     raise SceneError(
         f"mechanics.backend: {cfg.backend!r} needs a trained model, which is not available yet"
+    )
+
+
+def _pgd_backend(sim: Simulation) -> MechanicsBackend:
+    """Hybrid-PGD from ``scene.mechanics.model``; ``guard_tolerance`` turns on online enrichment."""
+    from diathermy.surrogates.pgd.backend import PGDBackend
+    from diathermy.surrogates.pgd.model import load_model
+
+    cfg = sim.scene.mechanics
+    if not cfg.model:
+        raise SceneError(
+            "mechanics.backend 'pgd' needs mechanics.model: a PGD model file (diathermy pgd-build)"
+        )
+    model = load_model(cfg.model, grid_shape=sim.scene.grid, block_m=sim.scene.block_m)
+
+    def position() -> tuple[float, float] | None:
+        t_mid = sim.state.time_s + 0.5 * sim.scene.dt_s  # the step's pose time (see step())
+        for el in sim.scene.electrodes:
+            pose = electrode_pose(el, t_mid, sim.state.overrides.get(el.name))
+            if pose.active:
+                return pose.position_m
+        return None
+
+    return PGDBackend(
+        model,
+        sim.disc.mesh,
+        sim.disc.grid,
+        enrich_tol=cfg.guard_tolerance,
+        position_fn=position,
+        rtol=cfg.rtol,
     )
