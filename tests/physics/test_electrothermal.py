@@ -78,3 +78,19 @@ def test_staggered_step_reuses_the_potential_and_closes_energy(mesh_geom, rng):
     assert e.joule_j == pytest.approx(0.03 * second.joule_w, rel=1e-12)
     assert abs(e.imbalance_j) < 1e-7 * (e.joule_j + e.convective_loss_j)
     assert second.T.max() > first.T.max() > 310.15
+
+
+def test_methods_can_alternate_on_one_solver(mesh_geom, rng):
+    """A monolithic step with a new sigma must not leave a stale potential for the staggered one."""
+    mesh, geom = mesh_geom
+    coeffs = scene(mesh, rng)
+    contact = contact_weights(mesh, (0.1, 0.05, 0.1), A_M)
+    kw = {"contact": contact, "drive": ElectrodeDrive(), "rho_c": coeffs["rho_c"], "k": coeffs["k"]}
+    T = np.full(mesh.n_nodes, 310.15)
+    mixed = ElectroThermal(mesh, geom)
+    mixed.staggered_step(T, 0.03, sigma=coeffs["sigma"], **kw)
+    mixed.monolithic_step(T, 0.03, sigma=2 * coeffs["sigma"], **kw)
+    after = mixed.staggered_step(T, 0.03, sigma=2 * coeffs["sigma"], **kw)
+    fresh = ElectroThermal(mesh, geom).staggered_step(T, 0.03, sigma=2 * coeffs["sigma"], **kw)
+    assert np.allclose(after.V, fresh.V, rtol=1e-8, atol=0)
+    assert np.allclose(after.T, fresh.T, rtol=1e-10, atol=0)

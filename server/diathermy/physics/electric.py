@@ -174,6 +174,7 @@ class PotentialSolver:
         self.krylov = KrylovSolver("potential", rtol=rtol, amg_options=opts)
         self.sigma: np.ndarray | None = None
         self.weights: np.ndarray | None = None
+        self.version = 0  # counts assemblies, so cached fields can tell whether sigma changed
         self._pending_assembly_s = 0.0
 
     @property
@@ -189,6 +190,7 @@ class PotentialSolver:
             raise SceneError("conductivity must be positive and finite in every tet")
         t0 = time.perf_counter()
         self.sigma = sigma.copy()
+        self.version += 1
         self.weights = self.stiffness.weights(sigma)
         self.krylov.set_operator(self.pattern.matrix(self.stiffness, self.weights))
         self._pending_assembly_s += time.perf_counter() - t0
@@ -258,22 +260,22 @@ class DrivenPotential:
         self.solver = solver
         self._contact: ContactWeights | None = None
         self._unit: tuple[np.ndarray, np.ndarray, float] | None = None  # V1, load1, R
-
-    def invalidate(self) -> None:
-        self._unit = None
+        self._version = -1  # the solver's operator version that V1 belongs to
 
     def unit_field(
         self, sigma: np.ndarray | float, contact: ContactWeights
     ) -> tuple[np.ndarray, np.ndarray, float, PotentialStats]:
         """(V1, load1, R, stats): potential and load at 1 A, resistance R in ohm."""
-        changed = self.solver.set_conductivity(sigma)
-        if not changed and self._unit is not None and contact is self._contact:
+        self.solver.set_conductivity(sigma)
+        current = self._version == self.solver.version and _same_contact(contact, self._contact)
+        if current and self._unit is not None:
             V1, load1, R = self._unit
             return V1, load1, R, PotentialStats(0, 0.0, 0.0, 0.0, 0.0, False, True)
         load1 = contact.weights / contact.area_m2
         V1, stats = self.solver.solve(load1)
         R = delivered_power(load1, V1)
         self._contact, self._unit = contact, (V1, load1, R)
+        self._version = self.solver.version
         return V1, load1, R, stats
 
     def solve(
@@ -289,6 +291,10 @@ class DrivenPotential:
             power_w=current**2 * R,
             stats=stats,
         )
+
+
+def _same_contact(a: ContactWeights, b: ContactWeights | None) -> bool:
+    return b is not None and (a is b or np.array_equal(a.weights, b.weights))
 
 
 def drive_current(drive: ElectrodeDrive, area_m2: float, resistance_ohm: float) -> float:

@@ -120,6 +120,7 @@ class ElectroThermal:
         ).T.tocsr()  # (n_nodes, n_tets): sums per-tet values onto their vertices
         self._block_amg: dict[str, tuple[object, pyamg.multilevel.MultilevelSolver]] = {}
         self._last: tuple[np.ndarray, float] | None = None  # latest (V, I)
+        self._unit_joule: tuple[np.ndarray, ...] | None = None  # V1 with its q and load at 1 A
 
     def staggered_step(
         self,
@@ -136,18 +137,25 @@ class ElectroThermal:
         """Potential (cached while sigma and contact stay), Joule heat, then the heat step."""
         t0 = time.perf_counter()
         sig = np.broadcast_to(np.asarray(sigma, dtype=float), (self.mesh.n_tets,))
-        pot = self.potential.solve(sig, contact, drive)
-        q = joule_heat(self.geom.grads, self.mesh.tets, sig, pot.V)
-        heat = self.heat.step(T, dt_s, rho_c=rho_c, k=k, q=q, source_w=source_w)
-        self._last = (pot.V, pot.current_a)
+        V1, load1, R, pot_stats = self.potential.unit_field(sig, contact)
+        current = drive_current(drive, contact.area_m2, R)
+        if self._unit_joule is None or self._unit_joule[0] is not V1:  # q, load scale with I^2
+            q1 = joule_heat(self.geom.grads, self.mesh.tets, sig, V1)
+            self._unit_joule = (V1, q1, self.heat.hmesh.joule_load(q1))
+        _, q1, joule1 = self._unit_joule
+        q, V = current**2 * q1, current * V1
+        heat = self.heat.step(
+            T, dt_s, rho_c=rho_c, k=k, q=q, source_w=source_w, joule_load_w=current**2 * joule1
+        )
+        self._last = (V, current)
         return CoupledStepResult(
             T=heat.T,
-            V=pot.V,
+            V=V,
             q=q,
-            current_a=pot.current_a,
-            power_w=pot.power_w,
+            current_a=current,
+            power_w=current**2 * R,
             joule_w=float(np.dot(q, self.geom.volumes)),
-            potential=pot.stats,
+            potential=pot_stats,
             heat=heat.stats,
             energy=heat.energy,
             wall_s=time.perf_counter() - t0,

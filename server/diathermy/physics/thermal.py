@@ -342,15 +342,19 @@ class HeatStepper:
         k: np.ndarray | float,
         q: np.ndarray | None = None,
         source_w: np.ndarray | None = None,
+        joule_load_w: np.ndarray | None = None,
     ) -> HeatStepResult:
         """Advance T (n_nodes,) in K by dt_s.
 
         rho_c: nodal volumetric heat capacity (n_nodes,) in J/(m^3 K); k: conductivity per tet
         (n_tets,) in W/(m K); q: Joule heat per tet (n_tets,) in W/m^3; source_w: extra nodal
-        source (n_nodes,) in W (a nodal load, e.g. minus the latent heat rate).
+        source (n_nodes,) in W (a nodal load, e.g. minus the latent heat rate); joule_load_w:
+        the nodal load (n_nodes,) in W of q where the caller already has it (skips summing q).
         """
         op, assembly_s = self.operator(dt_s, rho_c, k)
-        joule = self.hmesh.joule_load(q) if q is not None else None
+        joule = joule_load_w
+        if joule is None and q is not None:
+            joule = self.hmesh.joule_load(q)
         load = np.zeros(self.hmesh.n_nodes)
         for part in (joule, source_w):
             if part is not None:
