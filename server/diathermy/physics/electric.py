@@ -175,7 +175,9 @@ class PotentialSolver:
         self.fixed = fixed
         self.pattern: LaplacianPattern = laplacian_pattern(stiffness, free)
         opts = POTENTIAL_AMG_OPTIONS if amg_options is None else amg_options
-        self.krylov = KrylovSolver("potential", rtol=rtol, amg_options=opts)
+        # a cut changes sigma locally: the old hierarchy stays a good preconditioner (measured at
+        # 33x33x65: 13 -> 14..19 iterations as a trench deepens, against a 2x-solve setup)
+        self.krylov = KrylovSolver("potential", rtol=rtol, amg_options=opts, stale_factor=1.5)
         self.sigma: np.ndarray | None = None
         self.weights: np.ndarray | None = None
         self.version = 0  # counts assemblies, so cached fields can tell whether sigma changed

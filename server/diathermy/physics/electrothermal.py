@@ -32,7 +32,7 @@ import scipy.sparse.linalg as spla
 
 from diathermy.errors import SolverDivergedError
 from diathermy.fem.edges import EdgeStiffness, edge_stiffness
-from diathermy.fem.geometry import ElementGeometry
+from diathermy.fem.geometry import ElementGeometry, gradient
 from diathermy.fem.gmres import RightGMRES
 from diathermy.fem.multigrid import v_cycle_preconditioner
 from diathermy.mesh import TetMesh
@@ -264,7 +264,7 @@ class ElectroThermal:
     def _coupling(self, sigma: np.ndarray, V_star: np.ndarray) -> spla.LinearOperator:
         """C: free-node V (n_free,) -> nodal load (n_nodes,) of sigma grad V* . grad V."""
         tets, grads = self.mesh.tets, self.geom.grads
-        g_star = np.einsum("ea,eak->ek", V_star[tets], grads)
+        g_star = gradient(self.geom, tets, V_star)
         coeff = sigma * self.geom.volumes / 4.0
         data = coeff[:, None] * np.einsum("ek,eak->ea", g_star, grads)  # (n_tets, 4)
         n_t, n = self.mesh.n_tets, self.mesh.n_nodes

@@ -44,7 +44,7 @@ import scipy.sparse as sp
 from diathermy.errors import SceneError
 from diathermy.fem.edges import EdgeStiffness, LaplacianPattern, laplacian_pattern
 from diathermy.fem.geometry import ElementGeometry
-from diathermy.fem.scalar import triangle_areas, volume_load
+from diathermy.fem.scalar import surface_load, volume_load
 from diathermy.fem.solvers import KrylovSolver, SolveStats
 from diathermy.mesh import SIDES, TetMesh
 
@@ -58,14 +58,14 @@ class HeatMesh:
     Attributes:
         stiffness: edge couplings of the P1 diffusion.
         pattern: CSR pattern of the Laplacian on all nodes.
-        tets: (n_tets, 4); volumes (n_tets,) in m^3; nodal_volume (n_nodes,) in m^3 (lumped).
+        tets: (n_tets, 4); geom: element geometry; nodal_volume (n_nodes,) in m^3 (lumped).
         face_area: per side, the lumped boundary area of each node (n_nodes,) in m^2.
     """
 
     stiffness: EdgeStiffness
     pattern: LaplacianPattern
     tets: np.ndarray
-    volumes: np.ndarray
+    geom: ElementGeometry
     nodal_volume: np.ndarray
     face_area: dict[str, np.ndarray]
 
@@ -88,22 +88,18 @@ class HeatMesh:
 
     def joule_load(self, q: np.ndarray) -> np.ndarray:
         """Nodal load (n_nodes,) in W of a per-tet source q (n_tets,) in W/m^3."""
-        return np.bincount(self.tets.ravel(), np.repeat(q * self.volumes / 4.0, 4), self.n_nodes)
+        return volume_load(self.geom, self.tets, self.n_nodes, q)
 
 
 def heat_mesh(mesh: TetMesh, geom: ElementGeometry, stiffness: EdgeStiffness) -> HeatMesh:
     """Collect what every heat step of ``mesh`` needs."""
     n = mesh.n_nodes
-    face_area = {}
-    for side in SIDES:
-        tris = mesh.boundary_faces[side]
-        a = triangle_areas(mesh.points, tris)
-        face_area[side] = np.bincount(tris.ravel(), np.repeat(a / 3.0, 3), minlength=n)
+    face_area = {s: surface_load(mesh.points, mesh.boundary_faces[s], n, 1.0) for s in SIDES}
     return HeatMesh(
         stiffness=stiffness,
         pattern=laplacian_pattern(stiffness),
         tets=mesh.tets,
-        volumes=geom.volumes,
+        geom=geom,
         nodal_volume=volume_load(geom, mesh.tets, n, np.ones(mesh.n_tets)),
         face_area=face_area,
     )
@@ -143,8 +139,12 @@ def assemble_heat_operator(
     robin: np.ndarray,
     *,
     monotone: bool = True,
+    k_weights: np.ndarray | None = None,
 ) -> HeatOperator:
-    """Build the step's matrix: rho_c (n_nodes,) in J/(m^3 K), k (n_tets,) in W/(m K)."""
+    """Build the step's matrix: rho_c (n_nodes,) in J/(m^3 K), k (n_tets,) in W/(m K).
+
+    k_weights: the edge weights of this k (n_edges,) where the caller kept them from before.
+    """
     if not dt_s > 0 or not np.isfinite(dt_s):
         raise SceneError(f"time step must be positive and finite, got {dt_s}")
     rc = np.broadcast_to(np.asarray(rho_c, dtype=float), (hmesh.n_nodes,))
@@ -155,7 +155,7 @@ def assemble_heat_operator(
         raise SceneError("thermal conductivity must be positive and finite in every tet")
     stiff = hmesh.stiffness
     mass = rc * hmesh.nodal_volume
-    w = stiff.weights(kk)
+    w = stiff.weights(kk) if k_weights is None else k_weights
     theta = np.full(hmesh.n_nodes, 0.5)
     if monotone:
         diag = stiff.degree(w) + robin
@@ -301,14 +301,23 @@ class HeatStepper:
     ) -> tuple[HeatOperator, float]:
         """The step's operator (rebuilt only if dt, rho_c or k changed) and the assembly time."""
         rc = np.broadcast_to(np.asarray(rho_c, dtype=float), (self.hmesh.n_nodes,))
-        kk = np.broadcast_to(np.asarray(k, dtype=float), self.hmesh.volumes.shape)
+        kk = np.broadcast_to(np.asarray(k, dtype=float), self.hmesh.geom.volumes.shape)
         if self._op is not None and self._key is not None:
             dt0, rc0, k0 = self._key
-            if dt0 == dt_s and _same(rc0, rc) and _same(k0, kk):
+            same_k = _same(k0, kk)
+            if dt0 == dt_s and same_k and _same(rc0, rc):
                 return self._op, 0.0
+        else:
+            same_k = False
         t0 = time.perf_counter()
         self._op = assemble_heat_operator(
-            self.hmesh, dt_s, rc, kk, self.robin, monotone=self.monotone
+            self.hmesh,
+            dt_s,
+            rc,
+            kk,
+            self.robin,
+            monotone=self.monotone,
+            k_weights=self._op.w if same_k and self._op is not None else None,
         )
         self._key = (float(dt_s), rc.copy(), kk.copy())
         self._fresh = set(self._solvers)
