@@ -31,12 +31,11 @@ import scipy.sparse.linalg as spla
 
 from diathermy.fem.edges import edge_stiffness, laplacian_pattern
 from diathermy.fem.geometry import structured_geometry
-from diathermy.fem.multigrid import v_cycle_preconditioner
+from diathermy.fem.multigrid import SCALAR_AMG_OPTIONS, v_cycle_preconditioner
 from diathermy.fem.scalar import assemble_diffusion, assemble_robin, lumped_mass
 from diathermy.fem.sparsity import build_pattern
 from diathermy.mesh import Grid, build_tet_mesh
 from diathermy.physics.electric import (
-    POTENTIAL_AMG_OPTIONS,
     DrivenPotential,
     ElectrodeDrive,
     PotentialSolver,
@@ -135,7 +134,7 @@ def bench_potential(tab: Table, g: str, ctx: dict, repeat: int, direct: dict) ->
     b = (contact.weights / contact.area_m2)[free]
     setups = {}
     for name, A, opts in (
-        ("ours", A7, POTENTIAL_AMG_OPTIONS),
+        ("ours", A7, SCALAR_AMG_OPTIONS),
         ("default7", A7, {}),
         ("default15", A15, {}),
     ):
@@ -181,7 +180,7 @@ def bench_potential(tab: Table, g: str, ctx: dict, repeat: int, direct: dict) ->
     A_cut = pattern.matrix(stiff, stiff.weights(sigma_cut))
     t_stale, (_, its_s) = timed(lambda: cg(A_cut, b2, M, RTOL, x0=V1f), repeat)
     t_setup, ml_cut = timed(
-        lambda: pyamg.smoothed_aggregation_solver(A_cut, **POTENTIAL_AMG_OPTIONS), repeat
+        lambda: pyamg.smoothed_aggregation_solver(A_cut, **SCALAR_AMG_OPTIONS), repeat
     )
     M_cut = v_cycle_preconditioner(ml_cut)
     t_fresh, (_, its_f) = timed(lambda: cg(A_cut, b2, M_cut, RTOL, x0=V1f), repeat)

@@ -148,6 +148,10 @@ def test_operator_reused_until_coefficients_change(cube):
     changed = stepper.step(same.T, 0.03, rho_c=1.01 * RHO_C, k=K_TISSUE)
     assert first.stats.assembly_s > 0 and same.stats.assembly_s == 0.0
     assert changed.stats.assembly_s > 0
+    # the rebuilt operator (k's edge weights kept) equals a fresh one
+    fresh = assemble_heat_operator(hm, 0.03, 1.01 * RHO_C, K_TISSUE, stepper.robin)
+    kept = stepper.operator(0.03, 1.01 * RHO_C, K_TISSUE)[0]
+    assert abs(kept.matrix - fresh.matrix).max() == 0.0
 
 
 def test_rejects_bad_coefficients(cube):

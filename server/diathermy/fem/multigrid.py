@@ -7,9 +7,23 @@ initial and final residuals and their norms: two extra fine-level mat-vecs per a
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import scipy.sparse.linalg as spla
 from pyamg.multilevel import MultilevelSolver
+
+SCALAR_AMG_OPTIONS: dict[str, Any] = {
+    "presmoother": ("chebyshev", {"degree": 2}),
+    "postsmoother": ("chebyshev", {"degree": 2}),
+    "improve_candidates": None,
+}
+"""pyamg smoothed-aggregation options for scalar diffusion (potential, heat at large dt).
+
+Chebyshev smoothing and no candidate improvement: at 64x64x128 the potential takes 16 CG
+iterations at 0.67 s against pyamg's default 12 at 2.1 s, and the heat step at dt 1e3 s 18
+iterations at 1.1 s against 10 at 1.8 s (benchmarks/results/electrothermal.md).
+"""
 
 
 def v_cycle_preconditioner(ml: MultilevelSolver) -> spla.LinearOperator:

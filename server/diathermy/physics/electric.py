@@ -26,16 +26,9 @@ import numpy as np
 
 from diathermy.errors import SceneError
 from diathermy.fem.edges import EdgeStiffness, LaplacianPattern, laplacian_pattern
+from diathermy.fem.multigrid import SCALAR_AMG_OPTIONS
 from diathermy.fem.solvers import KrylovSolver, SolveStats
 from diathermy.mesh import TetMesh
-
-POTENTIAL_AMG_OPTIONS: dict[str, Any] = {
-    "presmoother": ("chebyshev", {"degree": 2}),
-    "postsmoother": ("chebyshev", {"degree": 2}),
-    "improve_candidates": None,
-}
-"""pyamg options for the potential: Chebyshev smoothing, no candidate improvement (measured
-fastest setup + solve at 64x64x128, see benchmarks/results/electrothermal.md)."""
 
 
 @dataclass(frozen=True)
@@ -174,7 +167,7 @@ class PotentialSolver:
         self.n_tets = mesh.n_tets
         self.fixed = fixed
         self.pattern: LaplacianPattern = laplacian_pattern(stiffness, free)
-        opts = POTENTIAL_AMG_OPTIONS if amg_options is None else amg_options
+        opts = SCALAR_AMG_OPTIONS if amg_options is None else amg_options
         # a cut changes sigma locally: the old hierarchy stays a good preconditioner (measured at
         # 33x33x65: 13 -> 14..19 iterations as a trench deepens, against a 2x-solve setup)
         self.krylov = KrylovSolver("potential", rtol=rtol, amg_options=opts, stale_factor=1.5)
@@ -273,8 +266,8 @@ class DrivenPotential:
     ) -> tuple[np.ndarray, np.ndarray, float, PotentialStats]:
         """(V1, load1, R, stats): potential and load at 1 A, resistance R in ohm."""
         self.solver.set_conductivity(sigma)
-        current = self._version == self.solver.version and _same_contact(contact, self._contact)
-        if current and self._unit is not None:
+        up_to_date = self._version == self.solver.version and _same_contact(contact, self._contact)
+        if up_to_date and self._unit is not None:
             V1, load1, R = self._unit
             return V1, load1, R, PotentialStats(0, 0.0, 0.0, 0.0, 0.0, False, True)
         load1 = contact.weights / contact.area_m2

@@ -34,10 +34,9 @@ from diathermy.errors import SolverDivergedError
 from diathermy.fem.edges import EdgeStiffness, edge_stiffness
 from diathermy.fem.geometry import ElementGeometry, gradient
 from diathermy.fem.gmres import RightGMRES
-from diathermy.fem.multigrid import v_cycle_preconditioner
+from diathermy.fem.multigrid import SCALAR_AMG_OPTIONS, v_cycle_preconditioner
 from diathermy.mesh import TetMesh
 from diathermy.physics.electric import (
-    POTENTIAL_AMG_OPTIONS,
     ContactWeights,
     DrivenPotential,
     ElectrodeDrive,
@@ -193,7 +192,7 @@ class ElectroThermal:
         free, n_f = solver.free, solver.free.size
         K_V = solver.krylov.A
         assert K_V is not None
-        M_V = self._amg("potential", K_V, POTENTIAL_AMG_OPTIONS)
+        M_V = self._amg("potential", K_V)
         if thermal_block == "auto":
             thermal_block = "jacobi" if self.heat.choose_preconditioner(op) == "jacobi" else "amg"
         M_T = self._thermal_preconditioner(op.matrix, thermal_block)
@@ -279,11 +278,11 @@ class ElectroThermal:
 
         return spla.LinearOperator((n, free.size), matvec=matvec, dtype=float)
 
-    def _amg(self, name: str, A: sp.csr_matrix, options: dict) -> spla.LinearOperator:
+    def _amg(self, name: str, A: sp.csr_matrix) -> spla.LinearOperator:
         """One AMG V-cycle as a preconditioner, its hierarchy kept while A is the same object."""
         cached = self._block_amg.get(name)
         if cached is None or cached[0] is not A:
-            ml = pyamg.smoothed_aggregation_solver(A, **options)
+            ml = pyamg.smoothed_aggregation_solver(A, **SCALAR_AMG_OPTIONS)
             self._block_amg[name] = (A, ml)
         else:
             ml = cached[1]
@@ -291,7 +290,7 @@ class ElectroThermal:
 
     def _thermal_preconditioner(self, A: sp.csr_matrix, kind: str) -> spla.LinearOperator:
         if kind == "amg":
-            return self._amg("heat", A, {})
+            return self._amg("heat", A)
         inv = 1.0 / A.diagonal()
         return spla.LinearOperator(A.shape, matvec=lambda r: inv * r, dtype=float)
 
