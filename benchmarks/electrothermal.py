@@ -201,7 +201,9 @@ def bench_potential(tab: Table, g: str, ctx: dict, repeat: int, direct: dict) ->
         P = float(np.dot(b2, Vf))
         parts.append(f"{rtol:g}: {its} it, {abs(np.dot(q, geom.volumes) - P) / P:.1e}")
     tab.put(
-        g, "warm-started rtol: CG iterations, rel. error of sum q|T| vs int j V", "<br>".join(parts)
+        g,
+        "warm-started rtol: CG iterations, rel. error of sum_e q_e vol_e vs int j V",
+        "<br>".join(parts),
     )
 
     # direct solve
@@ -308,7 +310,7 @@ def bench_coupled(tab: Table, g: str, ctx: dict, repeat: int) -> None:
             step = functools.partial(et.monolithic_step, thermal_block=block)
         T = np.full(mesh.n_nodes, T0)
         first = step(T, DT, contact=contact_weights(mesh, CENTER, RADIUS), **kw)
-        T, walls, its, passes = first.T, [], [], []
+        T, walls, its, passes, parts = first.T, [], [], [], []
         for i in range(repeat):
             x = CENTER[0] + (i + 1) * STEP_M * moving
             res = step(
@@ -318,6 +320,11 @@ def bench_coupled(tab: Table, g: str, ctx: dict, repeat: int) -> None:
             walls.append(res.wall_s)
             its.append(res.potential.iterations if res.potential else res.heat.iterations)
             passes.append(res.picard_passes)
+            if res.potential is not None:
+                p, h = res.potential, res.heat
+                pot = p.assembly_s + p.setup_s + p.solve_s
+                heat = h.assembly_s + h.setup_s + h.solve_s
+                parts.append((pot, heat, res.wall_s - pot - heat))
         results[(method, moving, block)] = wall = statistics.median(walls)
         name = f"{method} step, {'moving' if moving else 'fixed'} electrode"
         if method == "monolithic":
@@ -327,6 +334,15 @@ def bench_coupled(tab: Table, g: str, ctx: dict, repeat: int) -> None:
             name += " (s)"
             detail = f"{int(np.median(its))} potential CG it"
         tab.put(g, name, f"{f(wall)} ({detail}; first step {f(first.wall_s)})")
+        if parts:
+            pot, heat, rest = np.median(np.array(parts), axis=0)
+            ctx["summary"][(method, moving)] = (wall, pot, heat, rest)
+            tab.put(
+                g,
+                f"{method}, {'moving' if moving else 'fixed'}: potential / heat solve / "
+                "rest (Joule heat, rhs, energy) (s)",
+                f"{f(pot)} / {f(heat)} / {f(rest)}",
+            )
     T = np.full(mesh.n_nodes, T0)
     walls = []
     for i in range(repeat):
@@ -335,6 +351,7 @@ def bench_coupled(tab: Table, g: str, ctx: dict, repeat: int) -> None:
         T = prototype_step(ctx, T, contact)
         walls.append(time.perf_counter() - t0)
     proto = statistics.median(walls)
+    ctx["summary"]["prototype"] = proto
     tab.put(
         g,
         "straightforward prototype step (s): node pattern, fresh default AMG, rtol 1e-8",
@@ -354,7 +371,8 @@ def bench_coupled(tab: Table, g: str, ctx: dict, repeat: int) -> None:
     )
 
 
-def bench_grid(shape: tuple[int, int, int], repeat: int, tab: Table, direct: dict) -> None:
+def bench_grid(shape: tuple[int, int, int], repeat: int, tab: Table, direct: dict) -> dict:
+    """Fill the grid's column of ``tab``; returns the coupled-step timings for the summary."""
     g = "x".join(map(str, shape))
     log(f"grid {g}: mesh")
     t0 = time.perf_counter()
@@ -383,6 +401,7 @@ def bench_grid(shape: tuple[int, int, int], repeat: int, tab: Table, direct: dic
         "lap_free": lap_free,
         "heat_mesh": hm,
         "node_pattern": node_pattern,
+        "summary": {},
     }
     log(f"grid {g}: potential")
     bench_potential(tab, g, ctx, repeat, direct)
@@ -391,35 +410,59 @@ def bench_grid(shape: tuple[int, int, int], repeat: int, tab: Table, direct: dic
     log(f"grid {g}: coupled")
     bench_coupled(tab, g, ctx, repeat)
     tab.put(g, "peak RSS so far (GB)", f"{peak_rss_gb():.2f}")
+    return ctx["summary"]
+
+
+def summary(g: str, s: dict) -> str:
+    """Where the time of one electro-thermal step goes on the largest grid."""
+    fixed, moving, proto = s[("staggered", False)], s[("staggered", True)], s["prototype"]
+    return (
+        f"\n## Summary ({g})\n\n"
+        f"One staggered electro-thermal step takes {f(fixed[0])} s with a fixed electrode "
+        f"(heat solve {f(fixed[2])} s, the rest {f(fixed[3])} s: Joule heat scaled from the "
+        f"cached unit field, right-hand side, energy terms) and {f(moving[0])} s with a moving "
+        f"one: potential {f(moving[1])} s, heat solve {f(moving[2])} s, rest {f(moving[3])} s "
+        f"(mostly recomputing q = sigma |grad V|^2 and its nodal load). The straightforward "
+        f"prototype took {f(proto)} s per step in the same run: {proto / fixed[0]:.0f}x and "
+        f"{proto / moving[0]:.1f}x slower.\n"
+    )
 
 
 NOTES = """
 ## Notes
 
-- Every time is the median of `--repeat` runs; alternatives of one row ran side by side in
-  one process. The machine is shared: the load average is in the header, so read ratios.
-- **Assembly** of the potential and heat matrices goes through edge weights
-  (`diathermy.fem.edges`): the Kuhn stiffness couples only axis-parallel edges, so the
-  15-entry node pattern carries ~8 explicit zeros per row. Dropping them halves the stored
-  entries; the mat-vec gain is smaller than 2x (see its row): the index-bound CSR kernel costs
-  per row as much as per entry here.
-- **Potential**: SA AMG with Chebyshev smoothing and no candidate improvement; the lean
-  V-cycle (`diathermy.fem.multigrid`) skips pyamg's two residual evaluations per application.
-  rtol 1e-8 is the default: the rtol row shows the discrete energy identity
-  sum_e q_e |T_e| = int j V (required to 1e-6) after a warm start; from a zero start CG keeps
-  it exactly at any rtol (the residual is orthogonal to the iterate).
-- **Staggered, fixed electrode**: the potential only depends on sigma and the contact, so the
-  unit-current field and its Joule heat are reused and scaled by I (I^2); the step is the heat
-  solve (Jacobi-PCG, a handful of iterations at dt 0.03 s) plus its right-hand side.
-  **Moving electrode**: one warm-started potential solve per step dominates.
-- **Monolithic** block-GMRES solves V every step (a potential solve's worth of V-cycles plus
-  the T block's V-cycles and the coupling per iteration); when the electrode moves it needs a
-  second linearisation pass (the first one linearises about the old potential), so it costs
-  about twice the staggered step. It is there for fidelity to the paper and for a future
-  T-dependent sigma; the staggered step is the one to use.
-- **Direct solve**: SuperLU with a symmetric minimum-degree ordering; the ratio column is
+- Every time is the median of `--repeat` runs; alternatives of one row ran side by side in one
+  process. The machine is shared with other jobs (load average in the header): read ratios,
+  not absolute times. BLAS runs single-threaded: on 2 busy cores OpenBLAS threads only contend
+  (they made the GMRES Gram-Schmidt several times slower in a trial run).
+- **Assembly** goes through edge weights (`diathermy.fem.edges`): the Kuhn stiffness couples
+  only axis-parallel edges, so the 15-entry node pattern carries ~8 explicit zeros per row.
+  Dropping them halves the stored entries and makes per-sigma assembly ~15x cheaper; the
+  mat-vec gain is smaller than the 2x of the entry count (see its row).
+- **Potential**: SA AMG with Chebyshev smoothing and no candidate improvement
+  (`diathermy.fem.multigrid.SCALAR_AMG_OPTIONS`); more iterations than pyamg's default but each
+  much cheaper. The lean V-cycle (same module) skips pyamg's two residual evaluations per
+  application; `KrylovSolver` still uses pyamg's `aspreconditioner`, so the staggered rows do not
+  have that gain yet. rtol 1e-8 is the default: the rtol row shows the discrete energy identity
+  sum_e q_e |T_e| = int j V (required to 1e-6) after a warm start; from a zero start CG keeps it
+  exactly at any rtol (the residual is orthogonal to the iterate). A cut changes sigma locally:
+  the old hierarchy stays a good preconditioner (row "after a cut"), so `PotentialSolver` keeps
+  it until the iterations grow 1.5x.
+- **Heat**: Jacobi-PCG wherever its iteration bound from the diagonal dominance stays <= 250;
+  at dt 0.03 s that is 2-3 iterations with no setup. AMG takes over at dt ~ 1e3 s and beyond.
+  With the EOS changing rho c every step, the operator is re-assembled each step (row "heat
+  operator assembly": k's edge weights are kept when only rho c changed).
+- **Staggered, fixed electrode**: the potential depends only on sigma and the contact, so the
+  unit-current field and its Joule heat are reused and scaled by I and I^2; the step is the heat
+  solve plus its right-hand side. **Moving electrode**: one warm-started potential solve per
+  step and recomputing q dominate.
+- **Monolithic** block-GMRES solves V every step: per iteration one V-cycle on each diagonal
+  block, the coupling C (two sparse products of 12 entries per tet) twice, and the block
+  mat-vecs. When the electrode moved it needs a second linearisation pass. It exists for
+  fidelity to the paper and for a future temperature-dependent sigma; use the staggered step.
+- **Direct solve**: SuperLU with a symmetric minimum-degree ordering; the last number is
   (warm iterative potential solve) / (factor + solve). At 64x64x128 it is skipped when the
-  estimate from the grid before (time ~ n^2, fill ~ n^4/3) exceeds the limits.
+  estimate from the grid before (time ~ n^2, fill ~ n^4/3) exceeds 2 min or 8 GB.
 - **Prototype**: the straightforward path re-assembles on the 15-entry pattern, eliminates the
   bottom by slicing, builds fresh default SA hierarchies and solves the potential (rtol 1e-8)
   and the CN heat step by AMG-CG, every step.
@@ -445,7 +488,7 @@ def main(argv: list[str] | None = None) -> None:
     blas = threadpool_limits(args.blas_threads) if threadpool_limits else contextlib.nullcontext()
     with blas:
         for shape in grids:
-            bench_grid(shape, args.repeat, tab, direct)  # type: ignore[arg-type]
+            last = bench_grid(shape, args.repeat, tab, direct)  # type: ignore[arg-type]
     load1 = os.getloadavg()
     names = ["x".join(map(str, s)) for s in grids]
     lines = [
@@ -468,7 +511,7 @@ def main(argv: list[str] | None = None) -> None:
         lines.append(f"| {key} | " + " | ".join(row.get(n, "") for n in names) + " |")
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text("\n".join(lines) + "\n" + NOTES)
+    out.write_text("\n".join(lines) + "\n" + summary(names[-1], last) + NOTES)
     log(f"wrote {out}")
 
 
