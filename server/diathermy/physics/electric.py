@@ -5,8 +5,10 @@ disk and insulated elsewhere. The contact load is a quadrature of the disk itsel
 injected current is j * area at every resolution, also when the disk is smaller than a cell.
 
 Dirichlet nodes are eliminated (the solve runs on the free nodes only), so the matrix stays SPD;
-it is assembled from edge weights (7-point stencil on the Kuhn mesh) once per conductivity and
-solved by AMG-preconditioned CG with hierarchy reuse and warm starts.
+it is assembled from edge weights (7-point stencil on the Kuhn mesh) once per conductivity,
+scaled to a unit diagonal (robust AMG where a cut puts sigma 1e-5 beside 0.33, see
+``fem.multigrid``) and solved by AMG-preconditioned CG with hierarchy reuse and warm starts.
+rtol is the relative residual of the scaled system.
 
 Solver tolerance: rtol 1e-8 (relative residual) by default. The discrete energy identity
 sum_e q_e |T_e| = V.K.V = int j V holds exactly for CG from zero (Galerkin: the residual is
@@ -23,10 +25,11 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
+import scipy.sparse as sp
 
 from diathermy.errors import SceneError
 from diathermy.fem.edges import EdgeStiffness, LaplacianPattern, laplacian_pattern
-from diathermy.fem.multigrid import SCALAR_AMG_OPTIONS
+from diathermy.fem.multigrid import SCALAR_AMG_OPTIONS, unit_diagonal
 from diathermy.fem.solvers import KrylovSolver, SolveStats
 from diathermy.mesh import TetMesh
 
@@ -173,6 +176,8 @@ class PotentialSolver:
         self.krylov = KrylovSolver("potential", rtol=rtol, amg_options=opts, stale_factor=1.5)
         self.sigma: np.ndarray | None = None
         self.weights: np.ndarray | None = None
+        self.matrix: sp.csr_matrix | None = None  # K on the free nodes, unscaled
+        self._scale = np.ones(self.pattern.n)  # d = diag(K)^-1/2
         self.version = 0  # counts assemblies, so cached fields can tell whether sigma changed
         self._pending_assembly_s = 0.0
 
@@ -191,7 +196,9 @@ class PotentialSolver:
         self.sigma = sigma.copy()
         self.version += 1
         self.weights = self.stiffness.weights(sigma)
-        self.krylov.set_operator(self.pattern.matrix(self.stiffness, self.weights))
+        self.matrix = self.pattern.matrix(self.stiffness, self.weights)
+        scaled, self._scale = unit_diagonal(self.matrix)
+        self.krylov.set_operator(scaled)
         self._pending_assembly_s += time.perf_counter() - t0
         return True
 
@@ -206,8 +213,8 @@ class PotentialSolver:
         if dirichlet_values is not None:
             V[self.fixed] = dirichlet_values
             b -= self._lift(V)
-        x, st = self.krylov.solve(b)
-        V[self.free] = x
+        y, st = self.krylov.solve(self._scale * b)
+        V[self.free] = self._scale * y
         stats = _stats(st, self._pending_assembly_s, reassembled=self._pending_assembly_s > 0)
         self._pending_assembly_s = 0.0
         return V, stats

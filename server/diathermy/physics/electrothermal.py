@@ -26,7 +26,6 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-import pyamg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
@@ -34,7 +33,7 @@ from diathermy.errors import SolverDivergedError
 from diathermy.fem.edges import EdgeStiffness, edge_stiffness
 from diathermy.fem.geometry import ElementGeometry, gradient
 from diathermy.fem.gmres import RightGMRES
-from diathermy.fem.multigrid import SCALAR_AMG_OPTIONS, v_cycle_preconditioner
+from diathermy.fem.multigrid import scaled_amg_preconditioner
 from diathermy.mesh import TetMesh
 from diathermy.physics.electric import (
     ContactWeights,
@@ -121,7 +120,7 @@ class ElectroThermal:
             shape=(mesh.n_tets, mesh.n_nodes),
         ).T.tocsr()  # (n_nodes, n_tets): sums per-tet values onto their vertices
         self._gmres = RightGMRES("electro-thermal block system")
-        self._block_amg: dict[str, tuple[object, pyamg.multilevel.MultilevelSolver]] = {}
+        self._block_amg: dict[str, tuple[object, spla.LinearOperator]] = {}
         self._last: tuple[np.ndarray, float] | None = None  # latest (V, I)
         self._unit_joule: tuple[np.ndarray, ...] | None = None  # V1 with its q and load at 1 A
 
@@ -190,7 +189,7 @@ class ElectroThermal:
         load_T = np.zeros(self.mesh.n_nodes) if source_w is None else np.asarray(source_w, float)
         b_T = heat_rhs(op, self.heat.hmesh.stiffness, T, self.heat.t_ambient_k, load_T)
         free, n_f = solver.free, solver.free.size
-        K_V = solver.krylov.A
+        K_V = solver.matrix
         assert K_V is not None
         M_V = self._amg("potential", K_V)
         if thermal_block == "auto":
@@ -279,14 +278,12 @@ class ElectroThermal:
         return spla.LinearOperator((n, free.size), matvec=matvec, dtype=float)
 
     def _amg(self, name: str, A: sp.csr_matrix) -> spla.LinearOperator:
-        """One AMG V-cycle as a preconditioner, its hierarchy kept while A is the same object."""
+        """One scaled AMG V-cycle as a preconditioner, kept while A is the same object."""
         cached = self._block_amg.get(name)
         if cached is None or cached[0] is not A:
-            ml = pyamg.smoothed_aggregation_solver(A, **SCALAR_AMG_OPTIONS)
-            self._block_amg[name] = (A, ml)
-        else:
-            ml = cached[1]
-        return v_cycle_preconditioner(ml)
+            cached = (A, scaled_amg_preconditioner(A))
+            self._block_amg[name] = cached
+        return cached[1]
 
     def _thermal_preconditioner(self, A: sp.csr_matrix, kind: str) -> spla.LinearOperator:
         if kind == "amg":

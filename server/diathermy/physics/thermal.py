@@ -27,8 +27,9 @@ where K_theta is the Laplacian with edge weights theta_ij w_ij. Then
 theta_i, has the symmetric matrix diag(m/(dt theta)) + K + R and is monotone too, but its fluxes
 theta_i w_ij (T_i - T_j) no longer cancel pairwise: it leaks energy wherever theta varies.)
 
-Preconditioner: at small dt the matrix is nearly diagonal and Jacobi-PCG needs a handful of
-iterations with no setup; at large dt AMG wins. The choice is made per operator from its
+Solves run on the unit-diagonal scaling D^-1/2 A D^-1/2 (rtol is its relative residual; plain
+CG on it is Jacobi-PCG on A). At small dt the matrix is nearly diagonal and Jacobi-PCG needs a
+handful of iterations with no setup; at large dt AMG wins. The choice is made per operator from its
 diagonal dominance r = max_i sum_j |A_ij| / A_ii (Gershgorin: cond(D^-1 A) <= (1+r)/(1-r)),
 which bounds Jacobi-PCG's iterations; past 250 (measured crossover at 64x64x128, dt ~ 1e3 s:
 a Jacobi iteration costs ~1/8 of an AMG one, AMG needs ~18 and a setup) AMG takes over.
@@ -47,7 +48,7 @@ import scipy.sparse as sp
 from diathermy.errors import SceneError
 from diathermy.fem.edges import EdgeStiffness, LaplacianPattern, laplacian_pattern
 from diathermy.fem.geometry import ElementGeometry
-from diathermy.fem.multigrid import SCALAR_AMG_OPTIONS
+from diathermy.fem.multigrid import SCALAR_AMG_OPTIONS, unit_diagonal
 from diathermy.fem.scalar import surface_load, volume_load
 from diathermy.fem.solvers import KrylovSolver, SolveStats
 from diathermy.mesh import SIDES, TetMesh
@@ -117,6 +118,7 @@ class HeatOperator:
         dt_s: step in s. mass: m_i (n_nodes,) in J/K. robin: R_i (n_nodes,) in W/K.
         w: edge weights of k (n_edges,) in W/K. theta: node-wise theta (n_nodes,).
         theta_edge: per-edge theta (n_edges,). matrix: M/dt + K_theta + theta R, CSR.
+        scaled, scale: D^-1/2 matrix D^-1/2 and d = diag^-1/2 (n_nodes,), what the solvers see.
         dominance: max_i sum_{j != i} |A_ij| / A_ii of the matrix.
     """
 
@@ -127,6 +129,8 @@ class HeatOperator:
     theta: np.ndarray
     theta_edge: np.ndarray
     matrix: sp.csr_matrix
+    scaled: sp.csr_matrix
+    scale: np.ndarray
     dominance: float
 
     @property
@@ -169,6 +173,7 @@ def assemble_heat_operator(
     wt = theta_edge * w
     A = hmesh.pattern.matrix(stiff, wt, mass / dt_s + theta * robin)
     off = stiff.degree(np.abs(wt))
+    scaled, scale = unit_diagonal(A)
     return HeatOperator(
         dt_s=float(dt_s),
         mass=mass,
@@ -177,6 +182,8 @@ def assemble_heat_operator(
         theta=theta,
         theta_edge=theta_edge,
         matrix=A,
+        scaled=scaled,
+        scale=scale,
         dominance=float(np.max(off / A.diagonal())),
     )
 
@@ -292,8 +299,8 @@ class HeatStepper:
         self.preconditioner = preconditioner
         self.jacobi_max_iterations = jacobi_max_iterations
         self.rtol = rtol
-        self._solvers = {
-            "jacobi": KrylovSolver("heat", rtol=rtol, preconditioner="jacobi"),
+        self._solvers = {  # on the unit-diagonal matrix, where Jacobi is the identity
+            "jacobi": KrylovSolver("heat", rtol=rtol, preconditioner="none"),
             "amg": KrylovSolver(
                 "heat", rtol=rtol, amg_options=SCALAR_AMG_OPTIONS, stale_factor=1.5
             ),
@@ -339,14 +346,14 @@ class HeatStepper:
     def solve(
         self, op: HeatOperator, b: np.ndarray, x0: np.ndarray
     ) -> tuple[np.ndarray, SolveStats, str]:
-        """Solve op.matrix T = b from x0 with the chosen preconditioner."""
+        """Solve op.matrix T = b from x0 with the chosen preconditioner (on the scaled system)."""
         name = self.choose_preconditioner(op)
         solver = self._solvers[name]
         if name in self._fresh:
-            solver.set_operator(op.matrix)
+            solver.set_operator(op.scaled)
             self._fresh.discard(name)
-        T, st = solver.solve(b, x0)
-        return T, st, name
+        y, st = solver.solve(op.scale * b, x0 / op.scale)
+        return op.scale * y, st, name
 
     def step(
         self,
