@@ -2,8 +2,9 @@
 
 Chebyshev smoothing (cheap per sweep, see ``SCALAR_AMG_OPTIONS``) is a polynomial in A itself,
 so it needs A's diagonal to be even: a cut (sigma 1e-5 beside 0.33) made it take 88 CG
-iterations at 64x64x128 where the unit-diagonal scaling D^-1/2 A D^-1/2 takes 20. Build
-hierarchies on the scaled matrix (``unit_diagonal``).
+iterations at 64x64x128. Build hierarchies on the unit-diagonal scaling D^-1/2 A D^-1/2
+(``unit_diagonal``) with the scaled constant 1/d = D^1/2 1 as near-nullspace candidate
+(``scaled_candidates``): 16 iterations with the cut and without it, as unscaled without it.
 
 ``MultilevelSolver.aspreconditioner`` runs ``solve(b, maxiter=1)``, which also forms the
 initial and final residuals and their norms: two extra fine-level mat-vecs per application
@@ -28,8 +29,8 @@ SCALAR_AMG_OPTIONS: dict[str, Any] = {
 """pyamg smoothed-aggregation options for scalar diffusion (potential, heat at large dt).
 
 Chebyshev smoothing and no candidate improvement: at 64x64x128 the potential takes 16 CG
-iterations at 0.6 s against pyamg's default 12 at 1.5 s, and the heat step at dt 1e3 s 18
-iterations at 1.1 s against 10 at 1.8 s (benchmarks/results/electrothermal.md).
+iterations against pyamg's default 12, in 2-3x less time (three runs side by side), and the
+heat step at dt 1e3 s 18 iterations against 10 in 1.6x less (benchmarks/results/electrothermal.md).
 """
 
 
@@ -43,6 +44,11 @@ def unit_diagonal(A: sp.csr_matrix) -> tuple[sp.csr_matrix, np.ndarray]:
     rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
     data = A.data * d[rows] * d[A.indices]
     return sp.csr_matrix((data, A.indices, A.indptr), shape=A.shape), d
+
+
+def scaled_candidates(d: np.ndarray) -> np.ndarray:
+    """Near-nullspace (n, 1) of the scaled matrix: the constant of A seen through D^1/2."""
+    return (1.0 / d)[:, None]
 
 
 def v_cycle_preconditioner(ml: MultilevelSolver) -> spla.LinearOperator:
@@ -66,5 +72,6 @@ def v_cycle_preconditioner(ml: MultilevelSolver) -> spla.LinearOperator:
 def scaled_amg_preconditioner(A: sp.csr_matrix) -> spla.LinearOperator:
     """One V-cycle for A, built on its unit-diagonal scaling: r -> d * V(d * r)."""
     As, d = unit_diagonal(A)
-    V = v_cycle_preconditioner(pyamg.smoothed_aggregation_solver(As, **SCALAR_AMG_OPTIONS))
+    ml = pyamg.smoothed_aggregation_solver(As, B=scaled_candidates(d), **SCALAR_AMG_OPTIONS)
+    V = v_cycle_preconditioner(ml)
     return spla.LinearOperator(A.shape, matvec=lambda r: d * (V @ (d * np.ravel(r))), dtype=float)

@@ -29,7 +29,7 @@ import scipy.sparse as sp
 
 from diathermy.errors import SceneError
 from diathermy.fem.edges import EdgeStiffness, LaplacianPattern, laplacian_pattern
-from diathermy.fem.multigrid import SCALAR_AMG_OPTIONS, unit_diagonal
+from diathermy.fem.multigrid import SCALAR_AMG_OPTIONS, scaled_candidates, unit_diagonal
 from diathermy.fem.solvers import KrylovSolver, SolveStats
 from diathermy.mesh import TetMesh
 
@@ -198,6 +198,7 @@ class PotentialSolver:
         self.weights = self.stiffness.weights(sigma)
         self.matrix = self.pattern.matrix(self.stiffness, self.weights)
         scaled, self._scale = unit_diagonal(self.matrix)
+        self.krylov.near_nullspace = scaled_candidates(self._scale)
         self.krylov.set_operator(scaled)
         self._pending_assembly_s += time.perf_counter() - t0
         return True

@@ -48,7 +48,7 @@ import scipy.sparse as sp
 from diathermy.errors import SceneError
 from diathermy.fem.edges import EdgeStiffness, LaplacianPattern, laplacian_pattern
 from diathermy.fem.geometry import ElementGeometry
-from diathermy.fem.multigrid import SCALAR_AMG_OPTIONS, unit_diagonal
+from diathermy.fem.multigrid import SCALAR_AMG_OPTIONS, scaled_candidates, unit_diagonal
 from diathermy.fem.scalar import surface_load, volume_load
 from diathermy.fem.solvers import KrylovSolver, SolveStats
 from diathermy.mesh import SIDES, TetMesh
@@ -350,6 +350,7 @@ class HeatStepper:
         name = self.choose_preconditioner(op)
         solver = self._solvers[name]
         if name in self._fresh:
+            solver.near_nullspace = scaled_candidates(op.scale)
             solver.set_operator(op.scaled)
             self._fresh.discard(name)
         y, st = solver.solve(op.scale * b, x0 / op.scale)
