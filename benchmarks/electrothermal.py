@@ -461,17 +461,21 @@ NOTES = """
   (they made the GMRES Gram-Schmidt several times slower in a trial run).
 - **Assembly** goes through edge weights (`diathermy.fem.edges`): the Kuhn stiffness couples
   only axis-parallel edges, so the 15-entry node pattern carries ~8 explicit zeros per row.
-  Dropping them halves the stored entries and makes per-sigma assembly ~15x cheaper; the
+  Dropping them halves the stored entries and makes per-sigma assembly 15x or more cheaper; the
   mat-vec gain is smaller than the 2x of the entry count (see its row).
 - **Potential**: SA AMG with Chebyshev smoothing and no candidate improvement
-  (`diathermy.fem.multigrid.SCALAR_AMG_OPTIONS`); more iterations than pyamg's default but each
-  much cheaper. The lean V-cycle (same module) skips pyamg's two residual evaluations per
-  application; `KrylovSolver` still uses pyamg's `aspreconditioner`, so the staggered rows do not
-  have that gain yet. rtol 1e-8 is the default: the rtol row shows the discrete energy identity
-  sum_e q_e |T_e| = int j V (required to 1e-6) after a warm start; from a zero start CG keeps it
-  exactly at any rtol (the residual is orthogonal to the iterate). A cut changes sigma locally:
-  the old hierarchy stays a good preconditioner (row "after a cut"), so `PotentialSolver` keeps
-  it until the iterations grow 1.5x.
+  (`diathermy.fem.multigrid.SCALAR_AMG_OPTIONS`), built on the unit-diagonal scaling of K with
+  the scaled constant as near-nullspace candidate: as fast as unscaled on uniform sigma and
+  robust across a cut (row "after a cut": unscaled, the Chebyshev smoother, a polynomial in K,
+  needs 79 iterations at 64x64x128). More iterations than pyamg's default but each much cheaper.
+  The lean V-cycle (same module) skips pyamg's two residual evaluations per application;
+  `KrylovSolver` still uses pyamg's `aspreconditioner`, so the staggered rows do not have that
+  gain yet. rtol 1e-8 (of the scaled system) is the default: the rtol row shows the discrete
+  energy identity sum_e q_e |T_e| = int j V (required to 1e-6) after a warm start; from a zero
+  start CG keeps it exactly at any rtol (the residual is orthogonal to the iterate).
+  `PotentialSolver` keeps its hierarchy when sigma changes until the iterations grow 1.5x; the
+  benchmark's 6 mm trench appears at once and doubles them (then it rebuilds), while a cut
+  advancing at most 0.15 mm per step changes far less per step.
 - **Heat**: Jacobi-PCG wherever its iteration bound from the diagonal dominance stays <= 250;
   at dt 0.03 s that is 2-3 iterations with no setup. AMG takes over at dt ~ 1e3 s and beyond.
   With the EOS changing rho c every step, the operator is re-assembled each step (row "heat

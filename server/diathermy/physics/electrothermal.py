@@ -20,6 +20,7 @@ solver tolerance. sigma is held fixed within a step, so the V block does not dep
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -115,10 +116,6 @@ class ElectroThermal:
             monotone=monotone,
             preconditioner=heat_preconditioner,
         )
-        self._incidence_t = sp.csr_matrix(
-            (np.ones(mesh.tets.size), mesh.tets.ravel(), 4 * np.arange(mesh.n_tets + 1)),
-            shape=(mesh.n_tets, mesh.n_nodes),
-        ).T.tocsr()  # (n_nodes, n_tets): sums per-tet values onto their vertices
         self._gmres = RightGMRES("electro-thermal block system")
         self._block_amg: dict[str, tuple[object, spla.LinearOperator]] = {}
         self._last: tuple[np.ndarray, float] | None = None  # latest (V, I)
@@ -258,6 +255,16 @@ class ElectroThermal:
             return 1.0
         R = float(np.dot(contact.weights, V_star)) / (contact.area_m2 * I_star)
         return drive_current(drive, contact.area_m2, R)
+
+    @functools.cached_property
+    def _incidence_t(self) -> sp.csr_matrix:
+        """(n_nodes, n_tets) 0/1 matrix summing per-tet values onto their vertices."""
+        tets, n_t = self.mesh.tets, self.mesh.n_tets
+        P = sp.csr_matrix(
+            (np.ones(tets.size), tets.ravel(), 4 * np.arange(n_t + 1)),
+            shape=(n_t, self.mesh.n_nodes),
+        )
+        return P.T.tocsr()
 
     def _coupling(self, sigma: np.ndarray, V_star: np.ndarray) -> spla.LinearOperator:
         """C: free-node V (n_free,) -> nodal load (n_nodes,) of sigma grad V* . grad V."""
