@@ -111,7 +111,7 @@ def test_energy_balance_closes(cube, rng):
     for dt in (0.03, 10.0):
         res = stepper.step(T, dt, rho_c=rho_c, k=k, q=q, source_w=extra)
         e = res.energy
-        assert e.joule_j == pytest.approx(dt * np.dot(q, hm.volumes), rel=1e-12)
+        assert e.joule_j == pytest.approx(dt * np.dot(q, hm.geom.volumes), rel=1e-12)
         assert abs(e.imbalance_j) < 1e-8 * (abs(e.stored_j) + e.joule_j + abs(e.convective_loss_j))
         assert e.convective_loss_j > 0 and e.extra_j < 0
     assert res.stats.fallback_nodes.size > 0
@@ -123,7 +123,7 @@ def test_insulated_block_conserves_the_joule_energy(cube, rng):
     q = rng.uniform(0.0, 1e6, mesh.n_tets)
     res = stepper.step(np.full(mesh.n_nodes, T0), 1.0, rho_c=RHO_C, k=K_TISSUE, q=q)
     assert res.energy.convective_loss_j == 0.0
-    assert res.energy.stored_j == pytest.approx(np.dot(q, hm.volumes), rel=1e-9)
+    assert res.energy.stored_j == pytest.approx(np.dot(q, hm.geom.volumes), rel=1e-9)
 
 
 def test_preconditioner_follows_diagonal_dominance(cube, rng):
@@ -148,6 +148,10 @@ def test_operator_reused_until_coefficients_change(cube):
     changed = stepper.step(same.T, 0.03, rho_c=1.01 * RHO_C, k=K_TISSUE)
     assert first.stats.assembly_s > 0 and same.stats.assembly_s == 0.0
     assert changed.stats.assembly_s > 0
+    # the rebuilt operator (k's edge weights kept) equals a fresh one
+    fresh = assemble_heat_operator(hm, 0.03, 1.01 * RHO_C, K_TISSUE, stepper.robin)
+    kept = stepper.operator(0.03, 1.01 * RHO_C, K_TISSUE)[0]
+    assert abs(kept.matrix - fresh.matrix).max() == 0.0
 
 
 def test_rejects_bad_coefficients(cube):

@@ -86,7 +86,8 @@ class Simulation:
         self.last_report: StepReport | None = None
         stiffness = edge_stiffness(geom, mesh.tets, mesh.n_nodes)
         self.potential = DrivenPotential(
-            PotentialSolver(mesh, stiffness, rtol=scene.solver.electric_rtol)
+            # hierarchies rebuilt from the current operator: a restored run repeats the original
+            PotentialSolver(mesh, stiffness, rtol=scene.solver.electric_rtol, stale_factor=0.0)
         )
         self.heat = HeatStepper(
             heat_mesh(mesh, geom, stiffness),

@@ -14,11 +14,11 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
-import pyamg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from diathermy.errors import SolverDivergedError
+from diathermy.fem.multigrid import deterministic_sa, v_cycle_preconditioner
 
 Preconditioner = Literal["amg", "jacobi", "none"]
 
@@ -110,7 +110,7 @@ class KrylovSolver:
         A = self.A
         if self.preconditioner == "amg":
             self._ml = deterministic_sa(A, self.near_nullspace, self.amg_options)
-            self._M = self._ml.aspreconditioner(cycle="V")
+            self._M = v_cycle_preconditioner(self._ml)
         elif self.preconditioner == "jacobi":
             d = A.diagonal()
             if np.any(d <= 0):
@@ -184,22 +184,3 @@ class KrylovSolver:
                 M=self._M, callback=tick, callback_type="pr_norm",
             )  # fmt: skip
         return x, count[0], time.perf_counter() - t0
-
-
-def deterministic_sa(A: sp.spmatrix, B: np.ndarray | None, options: dict[str, Any]) -> Any:
-    """pyamg smoothed aggregation with its random spectral-radius start vectors seeded.
-
-    pyamg draws those vectors from numpy's global generator; seeding it (and putting the caller's
-    state back) makes the hierarchy a function of the matrix alone, so equal operators give equal
-    iterates and a restored checkpoint repeats the original run bit for bit. pyamg also caches
-    spectral radii on the matrix (``A.rho``, ``A.rho_D_inv``) from earlier setups and cycles; it is dropped first.
-    """
-    for cached in ("rho", "rho_D_inv", "rho_block_D_inv"):  # pyamg's caches on the matrix
-        if hasattr(A, cached):
-            delattr(A, cached)
-    saved = np.random.get_state()  # noqa: NPY002 (pyamg draws from the legacy global state)
-    np.random.seed(20260101)  # noqa: NPY002
-    try:
-        return pyamg.smoothed_aggregation_solver(A, B=B, **options)
-    finally:
-        np.random.set_state(saved)  # noqa: NPY002

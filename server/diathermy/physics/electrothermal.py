@@ -12,30 +12,31 @@ with the Joule coupling linearised about the latest potential V*: q = sigma grad
 C V is the nodal load of that q and C is sparse (C = P^T S: S (n_tets x n_nodes) holds
 sigma |T|/4 grad V* . grad N_b per tet, P the tet-node incidence). Each block row is scaled by
 its right-hand side norm; the preconditioner is block lower triangular with one AMG V-cycle on
-K_V and one on A_T (or Jacobi, see ``thermal_block``). If V moved away from V* (new sigma or
-contact), the step re-linearises about the new V and solves again (Picard), so both methods agree
-to solver tolerance. sigma is held fixed within a step, so the V block does not depend on T.
+K_V and one on A_T, or Jacobi on A_T where the heat step would pick it (``thermal_block``).
+If V moved away from V* (new sigma or contact, or the first step, which starts from V* = 0),
+the step re-linearises about the new V and solves again (Picard), so both methods agree to
+solver tolerance. sigma is held fixed within a step, so the V block does not depend on T.
 """
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-import pyamg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from diathermy.errors import SolverDivergedError
 from diathermy.fem.edges import EdgeStiffness, edge_stiffness
-from diathermy.fem.geometry import ElementGeometry
-from diathermy.fem.solvers import deterministic_sa
+from diathermy.fem.geometry import ElementGeometry, gradient
+from diathermy.fem.gmres import RightGMRES
+from diathermy.fem.multigrid import scaled_amg_preconditioner
 from diathermy.mesh import TetMesh
 from diathermy.physics.electric import (
-    POTENTIAL_AMG_OPTIONS,
     ContactWeights,
     DrivenPotential,
     ElectrodeDrive,
@@ -97,7 +98,7 @@ class ElectroThermal:
         geom: ElementGeometry,
         *,
         stiffness: EdgeStiffness | None = None,
-        potential_rtol: float = 1e-10,
+        potential_rtol: float = 1e-8,
         heat_rtol: float = 1e-10,
         h_w_per_m2_k: float | Mapping[str, float] = 25.0,
         t_ambient_k: float = 298.15,
@@ -115,12 +116,10 @@ class ElectroThermal:
             monotone=monotone,
             preconditioner=heat_preconditioner,
         )
-        self._incidence_t = sp.csr_matrix(
-            (np.ones(mesh.tets.size), mesh.tets.ravel(), 4 * np.arange(mesh.n_tets + 1)),
-            shape=(mesh.n_tets, mesh.n_nodes),
-        ).T.tocsr()  # (n_nodes, n_tets): sums per-tet values onto their vertices
-        self._block_amg: dict[str, tuple[object, pyamg.multilevel.MultilevelSolver]] = {}
+        self._gmres = RightGMRES("electro-thermal block system")
+        self._block_amg: dict[str, tuple[object, spla.LinearOperator]] = {}
         self._last: tuple[np.ndarray, float] | None = None  # latest (V, I)
+        self._unit_joule: tuple[np.ndarray, ...] | None = None  # V1 with its q and load at 1 A
 
     def staggered_step(
         self,
@@ -137,18 +136,25 @@ class ElectroThermal:
         """Potential (cached while sigma and contact stay), Joule heat, then the heat step."""
         t0 = time.perf_counter()
         sig = np.broadcast_to(np.asarray(sigma, dtype=float), (self.mesh.n_tets,))
-        pot = self.potential.solve(sig, contact, drive)
-        q = joule_heat(self.geom.grads, self.mesh.tets, sig, pot.V)
-        heat = self.heat.step(T, dt_s, rho_c=rho_c, k=k, q=q, source_w=source_w)
-        self._last = (pot.V, pot.current_a)
+        V1, load1, R, pot_stats = self.potential.unit_field(sig, contact)
+        current = drive_current(drive, contact.area_m2, R)
+        if self._unit_joule is None or self._unit_joule[0] is not V1:  # q, load scale with I^2
+            q1 = joule_heat(self.geom.grads, self.mesh.tets, sig, V1)
+            self._unit_joule = (V1, q1, self.heat.hmesh.joule_load(q1))
+        _, q1, joule1 = self._unit_joule
+        q, V = current**2 * q1, current * V1
+        heat = self.heat.step(
+            T, dt_s, rho_c=rho_c, k=k, q=q, source_w=source_w, joule_load_w=current**2 * joule1
+        )
+        self._last = (V, current)
         return CoupledStepResult(
             T=heat.T,
-            V=pot.V,
+            V=V,
             q=q,
-            current_a=pot.current_a,
-            power_w=pot.power_w,
+            current_a=current,
+            power_w=current**2 * R,
             joule_w=float(np.dot(q, self.geom.volumes)),
-            potential=pot.stats,
+            potential=pot_stats,
             heat=heat.stats,
             energy=heat.energy,
             wall_s=time.perf_counter() - t0,
@@ -166,7 +172,7 @@ class ElectroThermal:
         k: np.ndarray | float,
         source_w: np.ndarray | None = None,
         rtol: float = 1e-10,
-        thermal_block: Literal["amg", "jacobi"] = "amg",
+        thermal_block: Literal["auto", "amg", "jacobi"] = "auto",
         max_picard: int = 3,
     ) -> CoupledStepResult:
         """Solve [V; T] together by GMRES with a block lower-triangular AMG preconditioner."""
@@ -174,35 +180,36 @@ class ElectroThermal:
         sig = np.broadcast_to(np.asarray(sigma, dtype=float), (self.mesh.n_tets,))
         solver = self.potential.solver
         solver.set_conductivity(sig)
-        if self._last is None:  # nothing to linearise about yet: one potential solve
-            first = self.potential.solve(sig, contact, drive)
-            self._last = (first.V, first.current_a)
+        if self._last is None:  # nothing to linearise about yet: the first pass finds V
+            self._last = (np.zeros(self.mesh.n_nodes), 0.0)
         op, assembly_s = self.heat.operator(dt_s, rho_c, k)
         load_T = np.zeros(self.mesh.n_nodes) if source_w is None else np.asarray(source_w, float)
         b_T = heat_rhs(op, self.heat.hmesh.stiffness, T, self.heat.t_ambient_k, load_T)
         free, n_f = solver.free, solver.free.size
-        K_V = solver.krylov.A
+        K_V = solver.matrix
         assert K_V is not None
-        M_V = self._amg("potential", K_V, POTENTIAL_AMG_OPTIONS)
+        M_V = self._amg("potential", K_V)
+        if thermal_block == "auto":
+            thermal_block = "jacobi" if self.heat.choose_preconditioner(op) == "jacobi" else "amg"
         M_T = self._thermal_preconditioner(op.matrix, thermal_block)
         V_star, I_star = self._last
         x0 = np.concatenate([V_star[free], T])
         total_its, passes = 0, 0
         while True:
             passes += 1
-            current = self._current(V_star, I_star, contact, drive, sig)
+            current = self._current(V_star, I_star, contact, drive)
             b_V = current * contact.weights[free] / contact.area_m2
             C = self._coupling(sig, V_star)
-            x, its, res = _block_gmres(K_V, C, op.matrix, M_V, M_T, b_V, b_T, free, x0, rtol)
+            x, its, res = _block_gmres(self._gmres, K_V, C, op.matrix, M_V, M_T, b_V, b_T, x0, rtol)
             total_its += its
             V = np.zeros(self.mesh.n_nodes)
             V[free] = x[:n_f]
             change = np.linalg.norm(V - V_star) / max(float(np.linalg.norm(V)), 1e-300)
-            if change <= 10 * rtol or passes >= max_picard or current == 0.0:
+            if change <= 100 * rtol or passes >= max_picard or current == 0.0:
                 break
             # V is exact for this sigma and contact (its block ignores T): rescale it to the
             # drive and re-linearise about it
-            I_star = self._current(V, current, contact, drive, sig)
+            I_star = self._current(V, current, contact, drive)
             V_star = V * (I_star / current)
             x0 = np.concatenate([V_star[free], x[n_f:]])
         T_new = x[n_f:]
@@ -240,21 +247,29 @@ class ElectroThermal:
         I_star: float,
         contact: ContactWeights,
         drive: ElectrodeDrive,
-        sigma: np.ndarray,
     ) -> float:
         """Injected current; constant power takes R = (w . V*) / I* from the linearisation point."""
         if drive.mode == "current_density":
             return drive_current(drive, contact.area_m2, 1.0)
-        if I_star > 0:
-            R = float(np.dot(contact.weights, V_star)) / (contact.area_m2 * I_star)
-        else:  # no field to read R from: the unit-current solve gives it
-            R = self.potential.unit_field(sigma, contact)[2]
+        if I_star <= 0:  # no field to read R from: a 1 A pass, rescaled by the next pass
+            return 1.0
+        R = float(np.dot(contact.weights, V_star)) / (contact.area_m2 * I_star)
         return drive_current(drive, contact.area_m2, R)
+
+    @functools.cached_property
+    def _incidence_t(self) -> sp.csr_matrix:
+        """(n_nodes, n_tets) 0/1 matrix summing per-tet values onto their vertices."""
+        tets, n_t = self.mesh.tets, self.mesh.n_tets
+        P = sp.csr_matrix(
+            (np.ones(tets.size), tets.ravel(), 4 * np.arange(n_t + 1)),
+            shape=(n_t, self.mesh.n_nodes),
+        )
+        return P.T.tocsr()
 
     def _coupling(self, sigma: np.ndarray, V_star: np.ndarray) -> spla.LinearOperator:
         """C: free-node V (n_free,) -> nodal load (n_nodes,) of sigma grad V* . grad V."""
         tets, grads = self.mesh.tets, self.geom.grads
-        g_star = np.einsum("ea,eak->ek", V_star[tets], grads)
+        g_star = gradient(self.geom, tets, V_star)
         coeff = sigma * self.geom.volumes / 4.0
         data = coeff[:, None] * np.einsum("ek,eak->ea", g_star, grads)  # (n_tets, 4)
         n_t, n = self.mesh.n_tets, self.mesh.n_nodes
@@ -269,24 +284,23 @@ class ElectroThermal:
 
         return spla.LinearOperator((n, free.size), matvec=matvec, dtype=float)
 
-    def _amg(self, name: str, A: sp.csr_matrix, options: dict) -> spla.LinearOperator:
-        """One AMG V-cycle as a preconditioner, its hierarchy kept while A is the same object."""
+    def _amg(self, name: str, A: sp.csr_matrix) -> spla.LinearOperator:
+        """One scaled AMG V-cycle as a preconditioner, kept while A is the same object."""
         cached = self._block_amg.get(name)
         if cached is None or cached[0] is not A:
-            ml = deterministic_sa(A, None, options)
-            self._block_amg[name] = (A, ml)
-        else:
-            ml = cached[1]
-        return ml.aspreconditioner(cycle="V")
+            cached = (A, scaled_amg_preconditioner(A))
+            self._block_amg[name] = cached
+        return cached[1]
 
     def _thermal_preconditioner(self, A: sp.csr_matrix, kind: str) -> spla.LinearOperator:
         if kind == "amg":
-            return self._amg("heat", A, {})
+            return self._amg("heat", A)
         inv = 1.0 / A.diagonal()
         return spla.LinearOperator(A.shape, matvec=lambda r: inv * r, dtype=float)
 
 
 def _block_gmres(
+    gmres: RightGMRES,
     K_V: sp.csr_matrix,
     C: spla.LinearOperator,
     A_T: sp.csr_matrix,
@@ -294,12 +308,11 @@ def _block_gmres(
     M_T: spla.LinearOperator,
     b_V: np.ndarray,
     b_T: np.ndarray,
-    free: np.ndarray,
     x0: np.ndarray,
     rtol: float,
 ) -> tuple[np.ndarray, int, float]:
     """GMRES on the row-scaled 2x2 system; returns x, iterations, max block relative residual."""
-    n_f = free.size
+    n_f = b_V.size
     s_V = 1.0 / max(float(np.linalg.norm(b_V)), 1e-300)
     s_T = 1.0 / max(float(np.linalg.norm(b_T)), 1e-300)
 
@@ -312,28 +325,14 @@ def _block_gmres(
         z_T = M_T @ (r[n_f:] / s_T + C @ z_V)
         return np.concatenate([z_V, z_T])
 
-    n = x0.size
-    A = spla.LinearOperator((n, n), matvec=apply, dtype=float)
-    M = spla.LinearOperator((n, n), matvec=precondition, dtype=float)
-    b = np.concatenate([s_V * b_V, s_T * b_T])
-    count = [0]
-
-    def tick(_: object) -> None:
-        count[0] += 1
-
-    x = x0
-    target = rtol / np.sqrt(2.0)
-    for _ in range(4):  # restart cycles until the true residual of each block is small enough
-        x, _info = spla.gmres(
-            A, b, x0=x, rtol=target, atol=0.0, restart=60, maxiter=20, M=M,
-            callback=tick, callback_type="pr_norm",
-        )  # fmt: skip
-        r = b - A @ x
-        res = max(np.linalg.norm(r[:n_f]) / np.linalg.norm(b[:n_f]), np.linalg.norm(r[n_f:]))
-        if res <= rtol:
-            return x, count[0], float(res)
-    raise SolverDivergedError(
-        f"electro-thermal block GMRES did not converge (block residual {res:.3e} > {rtol:.1e})",
-        iterations=count[0],
-        residual=float(res),
-    )
+    b = np.concatenate([s_V * b_V, s_T * b_T])  # each block of unit norm
+    x, its, _ = gmres.solve(apply, precondition, b, x0, rtol / np.sqrt(2.0))
+    r = b - apply(x)
+    res = max(float(np.linalg.norm(r[:n_f])), float(np.linalg.norm(r[n_f:])))
+    if res > rtol:
+        raise SolverDivergedError(
+            f"electro-thermal block GMRES: block residual {res:.3e} > {rtol:.1e}",
+            iterations=its,
+            residual=res,
+        )
+    return x, its, res

@@ -23,12 +23,16 @@ where K_theta is the Laplacian with edge weights theta_ij w_ij. Then
   [min(T, T_amb), max(T, T_amb)] (discrete maximum principle) at any dt;
 - the edge fluxes cancel in the sum over nodes, so energy is conserved exactly:
   sum m (T' - T) = dt (sum f - sum R (theta T' + (1-theta) T - T_amb)) up to the solver residual.
-(Scaling row i by 1/theta_i instead, with node-wise theta in the fluxes, gives the same
-symmetric matrix diag(m/(dt theta)) + K but leaks energy where theta varies; the edge form avoids it.)
+(The row-wise alternative, node-wise theta in every flux of row i and the row divided by
+theta_i, has the symmetric matrix diag(m/(dt theta)) + K + R and is monotone too, but its fluxes
+theta_i w_ij (T_i - T_j) no longer cancel pairwise: it leaks energy wherever theta varies.)
 
-Preconditioner: at small dt the matrix is nearly diagonal and Jacobi-PCG needs a handful of
-iterations with no setup; at large dt AMG wins. The choice is made per operator from its
-diagonal dominance r = max_i sum_j |A_ij| / A_ii (Gershgorin: cond(D^-1 A) <= (1+r)/(1-r)).
+Solves run on the unit-diagonal scaling D^-1/2 A D^-1/2 (rtol is its relative residual; plain
+CG on it is Jacobi-PCG on A). At small dt the matrix is nearly diagonal and Jacobi-PCG needs a
+handful of iterations with no setup; at large dt AMG wins. The choice is made per operator from its
+diagonal dominance r = max_i sum_j |A_ij| / A_ii (Gershgorin: cond(D^-1 A) <= (1+r)/(1-r)),
+which bounds Jacobi-PCG's iterations; past 250 (measured crossover at 64x64x128, dt ~ 1e3 s:
+a Jacobi iteration costs ~1/8 of an AMG one, AMG needs ~18 and a setup) AMG takes over.
 """
 
 from __future__ import annotations
@@ -44,7 +48,8 @@ import scipy.sparse as sp
 from diathermy.errors import SceneError
 from diathermy.fem.edges import EdgeStiffness, LaplacianPattern, laplacian_pattern
 from diathermy.fem.geometry import ElementGeometry
-from diathermy.fem.scalar import triangle_areas, volume_load
+from diathermy.fem.multigrid import SCALAR_AMG_OPTIONS, scaled_candidates, unit_diagonal
+from diathermy.fem.scalar import surface_load, volume_load
 from diathermy.fem.solvers import KrylovSolver, SolveStats
 from diathermy.mesh import SIDES, TetMesh
 
@@ -58,14 +63,14 @@ class HeatMesh:
     Attributes:
         stiffness: edge couplings of the P1 diffusion.
         pattern: CSR pattern of the Laplacian on all nodes.
-        tets: (n_tets, 4); volumes (n_tets,) in m^3; nodal_volume (n_nodes,) in m^3 (lumped).
+        tets: (n_tets, 4); geom: element geometry; nodal_volume (n_nodes,) in m^3 (lumped).
         face_area: per side, the lumped boundary area of each node (n_nodes,) in m^2.
     """
 
     stiffness: EdgeStiffness
     pattern: LaplacianPattern
     tets: np.ndarray
-    volumes: np.ndarray
+    geom: ElementGeometry
     nodal_volume: np.ndarray
     face_area: dict[str, np.ndarray]
 
@@ -88,22 +93,18 @@ class HeatMesh:
 
     def joule_load(self, q: np.ndarray) -> np.ndarray:
         """Nodal load (n_nodes,) in W of a per-tet source q (n_tets,) in W/m^3."""
-        return np.bincount(self.tets.ravel(), np.repeat(q * self.volumes / 4.0, 4), self.n_nodes)
+        return volume_load(self.geom, self.tets, self.n_nodes, q)
 
 
 def heat_mesh(mesh: TetMesh, geom: ElementGeometry, stiffness: EdgeStiffness) -> HeatMesh:
     """Collect what every heat step of ``mesh`` needs."""
     n = mesh.n_nodes
-    face_area = {}
-    for side in SIDES:
-        tris = mesh.boundary_faces[side]
-        a = triangle_areas(mesh.points, tris)
-        face_area[side] = np.bincount(tris.ravel(), np.repeat(a / 3.0, 3), minlength=n)
+    face_area = {s: surface_load(mesh.points, mesh.boundary_faces[s], n, 1.0) for s in SIDES}
     return HeatMesh(
         stiffness=stiffness,
         pattern=laplacian_pattern(stiffness),
         tets=mesh.tets,
-        volumes=geom.volumes,
+        geom=geom,
         nodal_volume=volume_load(geom, mesh.tets, n, np.ones(mesh.n_tets)),
         face_area=face_area,
     )
@@ -117,6 +118,7 @@ class HeatOperator:
         dt_s: step in s. mass: m_i (n_nodes,) in J/K. robin: R_i (n_nodes,) in W/K.
         w: edge weights of k (n_edges,) in W/K. theta: node-wise theta (n_nodes,).
         theta_edge: per-edge theta (n_edges,). matrix: M/dt + K_theta + theta R, CSR.
+        scaled, scale: D^-1/2 matrix D^-1/2 and d = diag^-1/2 (n_nodes,), what the solvers see.
         dominance: max_i sum_{j != i} |A_ij| / A_ii of the matrix.
     """
 
@@ -127,6 +129,8 @@ class HeatOperator:
     theta: np.ndarray
     theta_edge: np.ndarray
     matrix: sp.csr_matrix
+    scaled: sp.csr_matrix
+    scale: np.ndarray
     dominance: float
 
     @property
@@ -143,8 +147,12 @@ def assemble_heat_operator(
     robin: np.ndarray,
     *,
     monotone: bool = True,
+    k_weights: np.ndarray | None = None,
 ) -> HeatOperator:
-    """Build the step's matrix: rho_c (n_nodes,) in J/(m^3 K), k (n_tets,) in W/(m K)."""
+    """Build the step's matrix: rho_c (n_nodes,) in J/(m^3 K), k (n_tets,) in W/(m K).
+
+    k_weights: the edge weights of this k (n_edges,) where the caller kept them from before.
+    """
     if not dt_s > 0 or not np.isfinite(dt_s):
         raise SceneError(f"time step must be positive and finite, got {dt_s}")
     rc = np.broadcast_to(np.asarray(rho_c, dtype=float), (hmesh.n_nodes,))
@@ -155,7 +163,7 @@ def assemble_heat_operator(
         raise SceneError("thermal conductivity must be positive and finite in every tet")
     stiff = hmesh.stiffness
     mass = rc * hmesh.nodal_volume
-    w = stiff.weights(kk)
+    w = stiff.weights(kk) if k_weights is None else k_weights
     theta = np.full(hmesh.n_nodes, 0.5)
     if monotone:
         diag = stiff.degree(w) + robin
@@ -165,6 +173,7 @@ def assemble_heat_operator(
     wt = theta_edge * w
     A = hmesh.pattern.matrix(stiff, wt, mass / dt_s + theta * robin)
     off = stiff.degree(np.abs(wt))
+    scaled, scale = unit_diagonal(A)
     return HeatOperator(
         dt_s=float(dt_s),
         mass=mass,
@@ -173,6 +182,8 @@ def assemble_heat_operator(
         theta=theta,
         theta_edge=theta_edge,
         matrix=A,
+        scaled=scaled,
+        scale=scale,
         dominance=float(np.max(off / A.diagonal())),
     )
 
@@ -282,7 +293,7 @@ class HeatStepper:
         rtol: float = 1e-10,
         monotone: bool = True,
         preconditioner: HeatPreconditioner = "auto",
-        jacobi_max_iterations: float = 60.0,
+        jacobi_max_iterations: float = 250.0,
         amg_stale_factor: float = 1.5,
     ) -> None:
         self.hmesh = hmesh
@@ -292,10 +303,10 @@ class HeatStepper:
         self.preconditioner = preconditioner
         self.jacobi_max_iterations = jacobi_max_iterations
         self.rtol = rtol
-        self._solvers = {
-            "jacobi": KrylovSolver("heat", rtol=rtol, preconditioner="jacobi"),
+        self._solvers = {  # on the unit-diagonal matrix, where Jacobi is the identity
+            "jacobi": KrylovSolver("heat", rtol=rtol, preconditioner="none"),
             "amg": KrylovSolver(
-                "heat", rtol=rtol, preconditioner="amg", stale_factor=amg_stale_factor
+                "heat", rtol=rtol, amg_options=SCALAR_AMG_OPTIONS, stale_factor=amg_stale_factor
             ),
         }
         self._key: tuple[float, np.ndarray, np.ndarray] | None = None
@@ -307,14 +318,23 @@ class HeatStepper:
     ) -> tuple[HeatOperator, float]:
         """The step's operator (rebuilt only if dt, rho_c or k changed) and the assembly time."""
         rc = np.broadcast_to(np.asarray(rho_c, dtype=float), (self.hmesh.n_nodes,))
-        kk = np.broadcast_to(np.asarray(k, dtype=float), self.hmesh.volumes.shape)
+        kk = np.broadcast_to(np.asarray(k, dtype=float), self.hmesh.geom.volumes.shape)
         if self._op is not None and self._key is not None:
             dt0, rc0, k0 = self._key
-            if dt0 == dt_s and _same(rc0, rc) and _same(k0, kk):
+            same_k = _same(k0, kk)
+            if dt0 == dt_s and same_k and _same(rc0, rc):
                 return self._op, 0.0
+        else:
+            same_k = False
         t0 = time.perf_counter()
         self._op = assemble_heat_operator(
-            self.hmesh, dt_s, rc, kk, self.robin, monotone=self.monotone
+            self.hmesh,
+            dt_s,
+            rc,
+            kk,
+            self.robin,
+            monotone=self.monotone,
+            k_weights=self._op.w if same_k and self._op is not None else None,
         )
         self._key = (float(dt_s), rc.copy(), kk.copy())
         self._fresh = set(self._solvers)
@@ -330,14 +350,15 @@ class HeatStepper:
     def solve(
         self, op: HeatOperator, b: np.ndarray, x0: np.ndarray
     ) -> tuple[np.ndarray, SolveStats, str]:
-        """Solve op.matrix T = b from x0 with the chosen preconditioner."""
+        """Solve op.matrix T = b from x0 with the chosen preconditioner (on the scaled system)."""
         name = self.choose_preconditioner(op)
         solver = self._solvers[name]
         if name in self._fresh:
-            solver.set_operator(op.matrix)
+            solver.near_nullspace = scaled_candidates(op.scale)
+            solver.set_operator(op.scaled)
             self._fresh.discard(name)
-        T, st = solver.solve(b, x0)
-        return T, st, name
+        y, st = solver.solve(op.scale * b, x0 / op.scale)
+        return op.scale * y, st, name
 
     def step(
         self,
@@ -348,15 +369,19 @@ class HeatStepper:
         k: np.ndarray | float,
         q: np.ndarray | None = None,
         source_w: np.ndarray | None = None,
+        joule_load_w: np.ndarray | None = None,
     ) -> HeatStepResult:
         """Advance T (n_nodes,) in K by dt_s.
 
         rho_c: nodal volumetric heat capacity (n_nodes,) in J/(m^3 K); k: conductivity per tet
         (n_tets,) in W/(m K); q: Joule heat per tet (n_tets,) in W/m^3; source_w: extra nodal
-        source (n_nodes,) in W (a nodal load, e.g. minus the latent heat rate).
+        source (n_nodes,) in W (a nodal load, e.g. minus the latent heat rate); joule_load_w:
+        the nodal load (n_nodes,) in W of q where the caller already has it (skips summing q).
         """
         op, assembly_s = self.operator(dt_s, rho_c, k)
-        joule = self.hmesh.joule_load(q) if q is not None else None
+        joule = joule_load_w
+        if joule is None and q is not None:
+            joule = self.hmesh.joule_load(q)
         load = np.zeros(self.hmesh.n_nodes)
         for part in (joule, source_w):
             if part is not None:

@@ -72,4 +72,8 @@ def get_accuracy_cost(state: StateDep, _owner: OwnerDep, scene: str | None = Non
     except SceneError as err:
         raise HTTPException(404, str(err)) from None
     rows = [_finite(r) for r in data["rows"] if scene is None or r["scene"] == scene]
-    return {"generated": data.get("generated", ""), "steps": int(data.get("steps", 0)), "rows": rows}
+    return {
+        "generated": data.get("generated", ""),
+        "steps": int(data.get("steps", 0)),
+        "rows": rows,
+    }
