@@ -104,11 +104,15 @@ class ElectroThermal:
         t_ambient_k: float = 298.15,
         monotone: bool = True,
         heat_preconditioner: Literal["auto", "jacobi", "amg"] = "auto",
+        potential: DrivenPotential | None = None,
+        heat: HeatStepper | None = None,
     ) -> None:
         stiffness = stiffness or edge_stiffness(geom, mesh.tets, mesh.n_nodes)
         self.mesh, self.geom = mesh, geom
-        self.potential = DrivenPotential(PotentialSolver(mesh, stiffness, rtol=potential_rtol))
-        self.heat = HeatStepper(
+        self.potential = potential or DrivenPotential(
+            PotentialSolver(mesh, stiffness, rtol=potential_rtol)
+        )
+        self.heat = heat or HeatStepper(
             heat_mesh(mesh, geom, stiffness),
             h_w_per_m2_k=h_w_per_m2_k,
             t_ambient_k=t_ambient_k,
