@@ -149,6 +149,9 @@ def build_parser() -> argparse.ArgumentParser:
     from diathermy.datagen.cli import add_datagen_parser
 
     add_datagen_parser(sub)
+    from diathermy.worker.cli import add_worker_parsers
+
+    add_worker_parsers(sub)
     return p
 
 
