@@ -7,5 +7,5 @@ cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
 extra=()
 if [ -d /opt/wheels ]; then extra+=(--find-links /opt/wheels); fi
-"$PY" -m pip install --quiet "${extra[@]}" -c constraints/local.txt -e ".[dev]"
+"$PY" -m pip install --quiet "${extra[@]}" -c constraints/local.txt -e ".[dev,cluster]"
 "$PY" -m diathermy simulate --out runs/default.h5 ${DIATHERMY_SETUP_ARGS:-}

@@ -145,6 +145,9 @@ def build_parser() -> argparse.ArgumentParser:
     from diathermy.service.cli import add_serve_parser  # FastAPI itself loads only when serving
 
     add_serve_parser(sub)
+    from diathermy.datagen.cli import add_datagen_parser
+
+    add_datagen_parser(sub)
     return p
 
 
