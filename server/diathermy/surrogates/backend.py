@@ -21,6 +21,7 @@ import torch
 from diathermy.engine.backends import MechanicsOutput
 from diathermy.errors import CheckpointError, SceneError
 from diathermy.fem.elastic import ElasticAssembler
+from diathermy.fem.geometry import structured_geometry
 from diathermy.mesh import TetMesh
 from diathermy.physics.equilibrium_guard import (
     GuardPreconditioner,
@@ -103,9 +104,13 @@ class CNNBackend:
         self.ersatz_ratio = float(ersatz_ratio)
         self.guard_tolerance = guard_tolerance
         self.guard_maxiter = int(guard_maxiter)
-        self._assembler: ElasticAssembler = assembler or mechanics_assembler(mesh)
+        self._assembler = assembler  # built on the first correction: a pure CNN never needs it
         self._preconditioners = GuardPreconditioners(guard_preconditioner)
-        self._geom = self._assembler.geom
+        self._geom = (
+            assembler.geom
+            if assembler is not None
+            else structured_geometry(mesh.points, mesh.tets, mesh.shape_id)
+        )
         self._free = ~clamped_bottom(mesh).mask(3 * mesh.n_nodes).reshape(-1, 3)
         self._input = torch.empty((1, 2, *grid.shape), dtype=torch.float32, device=self.device)
         self._solver: MechanicsSolver | None = None
@@ -139,6 +144,8 @@ class CNNBackend:
         """The FEM solver of this topology, rebuilt only when E changed; (solver, rebuilt)."""
         if self._solver is not None and np.array_equal(self._E, youngs_modulus_pa):
             return self._solver, False
+        if self._assembler is None:
+            self._assembler = mechanics_assembler(self.mesh)
         self._solver = MechanicsSolver(
             self.mesh,
             youngs_modulus_pa,
