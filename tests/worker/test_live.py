@@ -14,6 +14,7 @@ from pathlib import Path
 import httpx
 
 from diathermy.datagen import DatasetReader
+from diathermy.scene import builtin_scene
 from diathermy.worker.registry import resolve_model
 from tests.service.conftest import TOKEN_B, LiveServer
 from tests.worker.conftest import ROOT, TINY, WorkerProcess, log_lines, wait_for
@@ -90,6 +91,17 @@ def test_dataset_then_training_to_an_active_model(
     path = resolve_model(data_dir, (5, 5, 9))
     assert path == Path(model["dataset"]["path"]).parents[1] / "models/tiny/1/model.pt"
     assert path.is_file()
+
+    # a session on that grid runs its mechanics with the model through the hybrid-CNN backend
+    scene = builtin_scene("default").model_dump(mode="json")
+    scene["grid"] = [5, 5, 9]
+    scene["mechanics"] = {**scene["mechanics"], "backend": "cnn", "model": str(path)}
+    session = api.post("/v1/sessions", json={"scene": scene})
+    assert session.status_code == 201, session.text
+    stepped = api.post(f"/v1/sessions/{session.json()['id']}/step", json={"n": 2})
+    assert stepped.status_code == 200, stepped.text
+    sim = live.state.registry.sessions[session.json()["id"]].sim
+    assert sim._mechanics.name == "cnn" and sim._mechanics.model_path == path
 
     # another token sees none of these jobs
     with live.client(TOKEN_B) as other:
