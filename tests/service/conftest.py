@@ -19,6 +19,24 @@ from diathermy.service.engine import DefaultEngine
 TOKEN_A = "token-alpha"
 TOKEN_B = "token-bravo"
 SMALL = {"builtin": "default", "grid": [5, 5, 9]}
+CUT = {
+    "scene": {
+        "name": "quick-cut",
+        "block_m": [0.02, 0.01, 0.01],
+        "grid": [5, 5, 9],
+        "electrodes": [{"position_m": [0.01, 0.005], "power_w": 200.0}],
+    }
+}
+"""A 2 x 1 x 1 cm block under a 200 W electrode: the real engine cuts it within ~10 steps."""
+
+
+def step_until_cut(api: httpx.Client, sid: str, max_steps: int = 30) -> int:
+    """Step a session one step at a time until its last report shows a cut; returns the step."""
+    for _ in range(max_steps):
+        rep = api.post(f"/v1/sessions/{sid}/step").json()["reports"][-1]
+        if rep["cut_volume_m3"] > 0:
+            return int(rep["step"])
+    raise AssertionError(f"no cut within {max_steps} steps")
 
 
 def free_port() -> int:

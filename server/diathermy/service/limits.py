@@ -2,30 +2,18 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
+from diathermy.engine.limits import estimate_memory_bytes
 from diathermy.service.config import Settings
 from diathermy.service.exceptions import LimitExceededError, TooManySessionsError
 
-BYTES_PER_NODE = 6_000
-"""Fitted cost of one node with all effects (mesh, operators, AMG hierarchies, fields)."""
-BASE_BYTES = 64 * 2**20
-"""Fixed cost of a session independent of its grid."""
 
-
-def estimate_memory_bytes(grid_shape: tuple[int, int, int]) -> int:
-    """Estimated resident bytes of a session on this grid; the engine's own estimate if it has one."""
-    try:
-        from diathermy.engine.limits import estimate_memory_bytes as engine_estimate
-    except ImportError:
-        nz, ny, nx = grid_shape
-        return BASE_BYTES + BYTES_PER_NODE * nz * ny * nx
-    return int(engine_estimate(grid_shape))
-
-
-def check_grid(settings: Settings, grid_shape: tuple[int, int, int]) -> int:
-    """Reject a grid over the node or memory limit; returns its estimated bytes."""
+def check_grid(settings: Settings, grid_shape: tuple[int, int, int], effects: Iterable[str]) -> int:
+    """Reject a grid over the node or memory limit (the engine's estimate); returns the bytes."""
     nz, ny, nx = grid_shape
     nodes = nz * ny * nx
-    estimate = estimate_memory_bytes(grid_shape)
+    estimate = estimate_memory_bytes(grid_shape, effects)
     mib = estimate / 2**20
     if nodes > settings.max_grid_nodes:
         raise LimitExceededError(

@@ -78,7 +78,7 @@ async def create_session(
         data = scene.model_dump()
         data["grid"] = body.grid
         scene = scene_from_dict(data)
-    check_grid(settings, scene.grid)
+    check_grid(settings, scene.grid, scene.closed_effects)
 
     def build() -> SessionRecord:
         sim = registry.engine.create(scene)

@@ -1,0 +1,218 @@
+"""Typed requests and results. JSON shapes mirror the server's OpenAPI schemas (a test checks
+that they agree); results carrying arrays are frozen dataclasses of numpy arrays."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict
+
+Dtype = Literal["float16", "float32", "float64"]
+WireDtype = Literal["float16", "float32"]
+Region = Literal["volume", "surface"]
+
+
+class _Result(BaseModel):
+    """A server answer: unknown keys are kept (newer servers may add some), values are frozen."""
+
+    model_config = ConfigDict(extra="allow", frozen=True)
+
+
+class _Request(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+# ------------------------------------------------------------------ requests
+class SessionCreate(_Request):
+    """A new session from a built-in scene name or an inline scene, optionally on another grid."""
+
+    scene: dict[str, Any] | None = None
+    builtin: str | None = None
+    grid: tuple[int, int, int] | None = None
+
+
+# Values are checked by the server (one source of truth); its answer names the field.
+class StepRequest(_Request):
+    n: int = 1
+
+
+class ElectrodeUpdate(_Request):
+    """Electrode changes applied before the next step; None leaves a value unchanged."""
+
+    position_m: tuple[float, float] | None = None
+    power_w: float | None = None
+    current_density_a_per_m2: float | None = None
+    active: bool | None = None
+
+
+# ------------------------------------------------------------------ results
+class Grid(_Result):
+    """The node grid: shape (nz, ny, nx), spacing (dx, dy, dz) m, origin and size in m."""
+
+    shape: tuple[int, int, int]
+    spacing_m: tuple[float, float, float]
+    origin_m: tuple[float, float, float]
+    size_m: tuple[float, float, float]
+    n_nodes: int
+
+
+class Snapshot(_Result):
+    """A saved state of a session, restorable by ``id``."""
+
+    id: str
+    step: int
+    time_s: float
+    created_at: float
+
+
+class EffectReport(_Result):
+    """One effect in one step: whether it ran (else why not), wall time s, solver iterations."""
+
+    ran: bool
+    reason: str = ""
+    wall_s: float = 0.0
+    iterations: int = 0
+    extra: dict[str, Any] = {}
+
+
+class StepReport(_Result):
+    """What one step did: per-effect reports, delivered power W, maxima, the cut's volume m^3."""
+
+    step: int
+    time_s: float
+    effects: dict[str, EffectReport] = {}
+    wall_s: float = 0.0
+    delivered_power_w: float | None = 0.0
+    max_temperature_k: float | None = 0.0
+    max_pressure_pa: float | None = 0.0
+    max_displacement_m: float | None = 0.0
+    max_strain_energy_j_per_m3: float | None = 0.0
+    cut_volume_m3: float | None = 0.0
+    crater_depth_m: float | None = 0.0
+    energy: dict[str, float | None] = {}
+
+
+class SessionInfo(_Result):
+    """A session as the server describes it (``SessionPublic``)."""
+
+    id: str
+    scene_name: str
+    grid: Grid
+    effects: list[str]
+    dof_counts: dict[str, int]
+    step: int
+    time_s: float
+    created_at: float
+    loaded: bool
+    last_report: StepReport | None = None
+    snapshots: list[Snapshot] = []
+
+
+class StepResult(_Result):
+    """The reports of the steps one request took, and where the session is now."""
+
+    step: int
+    time_s: float
+    reports: list[StepReport]
+
+
+class ElectrodeAck(_Result):
+    """An electrode change was accepted; frames with ``control_id`` >= this one reflect it."""
+
+    name: str
+    control_id: int
+
+
+class Health(_Result):
+    status: Literal["ok", "starting"]
+    sessions: int = 0
+
+
+class Scene(_Result):
+    """A scene as the server returns it; every key of the server's scene model is kept.
+
+    ``model_dump()`` gives a dict that ``create_session(scene=...)`` accepts back.
+    """
+
+    name: str
+    description: str = ""
+    block_m: tuple[float, float, float]
+    grid: tuple[int, int, int]
+    dt_s: float
+    steps: int
+    effects: list[str]
+    electrodes: list[dict[str, Any]]
+
+
+@dataclass(frozen=True)
+class Fields:
+    """Arrays of one step: nodal (nz, ny, nx[, 3]) or per-tet (n_tets,), with the grid."""
+
+    step: int
+    time_s: float
+    grid: Grid | None
+    arrays: dict[str, np.ndarray]
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self.arrays[name]
+
+
+@dataclass(frozen=True)
+class Surface:
+    """The cut surface: vertices (n, 3) in m and triangles (m, 3); empty before any cut."""
+
+    step: int
+    time_s: float
+    vertices_m: np.ndarray
+    faces: np.ndarray
+
+    @property
+    def is_empty(self) -> bool:
+        return len(self.faces) == 0
+
+
+# ------------------------------------------------------------------ stream messages
+class Hello(_Result):
+    """The first stream message: the session's step and what it offers."""
+
+    type: Literal["hello"]
+    session: str
+    step: int
+    time_s: float
+    fields: list[str]
+    effects: list[str]
+    electrodes: list[str]
+
+
+class Ack(_Result):
+    """The server applied a control message; ``control_id`` orders it against frames."""
+
+    type: Literal["ack"]
+    of: str
+    control_id: int
+    tag: str | int | None = None
+    running: bool
+    rate_hz: float
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One step's state from the stream: fields as numpy arrays, the step report, the surface.
+
+    ``control_id`` is the last control applied before this step; ``dropped`` counts the frames
+    the server coalesced away for this client so far (it was reading too slowly).
+    """
+
+    session: str
+    step: int
+    time_s: float
+    control_id: int
+    dropped: int
+    report: StepReport | None
+    fields: dict[str, np.ndarray]
+    surface: Surface | None = None
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self.fields[name]
