@@ -240,7 +240,7 @@ class JobQueue:
         self, *, owner: str | None = None, state: JobState | None = None, limit: int = 1000
     ) -> list[Job]:
         """Jobs, newest first, optionally of one owner and one state."""
-        sql, args = "SELECT * FROM jobs WHERE 1=1", []
+        sql, args = "SELECT * FROM jobs WHERE 1=1", list[str]()
         if owner is not None:
             sql, args = sql + " AND owner = ?", [*args, owner]
         if state is not None:

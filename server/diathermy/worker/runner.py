@@ -31,7 +31,7 @@ JOB_MODULES = {
 def job_function(kind: JobKind) -> Callable[[JobContext], dict[str, Any]]:
     """The function that runs jobs of ``kind`` (importing it is the heavy part: torch, FEM)."""
     module, name = JOB_MODULES[kind]
-    return getattr(importlib.import_module(module), name)  # type: ignore[no-any-return]
+    return getattr(importlib.import_module(module), name)
 
 
 def _interrupt(_signum: int, _frame: FrameType | None) -> None:

@@ -87,7 +87,7 @@ class TrainOptions(_Spec):
     patience: Annotated[int, Field(ge=1)] = 10
     seed: Annotated[int, Field(ge=0)] = 0
     amp: Literal["none", "bf16", "fp16"] = "none"
-    device: str = Field("auto", max_length=32, pattern=r"^(auto|cpu|cuda(:\d+)?)$")
+    device: Annotated[str, Field(max_length=32, pattern=r"^(auto|cpu|cuda(:\d+)?)$")] = "auto"
     num_workers: Annotated[int, Field(ge=0, le=64)] = 0
     scale_samples: Annotated[int, Field(ge=1)] = 256
 
