@@ -86,6 +86,8 @@ async def _validation_error(_request: Request, err: Exception) -> JSONResponse:
         inner = _FIELD.match(msg)  # a model-level check names its field first: 'grid: ...'
         if inner and e.get("type") == "value_error":
             loc, msg = f"{loc}.{inner.group(1)}", msg[inner.end() :]
+        elif e.get("type") in ("union_tag_invalid", "union_tag_not_found"):
+            loc = f"{loc}.{str(e.get('ctx', {}).get('discriminator', '')).strip(chr(39))}"
         first_field = first_field or loc
         problems.append(f"{loc}: {msg}")
     return JSONResponse(
