@@ -155,6 +155,9 @@ def build_parser() -> argparse.ArgumentParser:
     from diathermy.report.cli import add_report_parser
 
     add_report_parser(sub)
+    from diathermy.worker.cli import add_worker_parsers
+
+    add_worker_parsers(sub)
     return p
 
 

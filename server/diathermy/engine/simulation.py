@@ -106,6 +106,12 @@ class Simulation:
         self.damage_law = ArrheniusDamage()
         self._contacts: dict[tuple[float, ...], ContactWeights] = {}
         self._mechanics = mechanics_backend
+        if (
+            mechanics_backend is None
+            and scene.mechanics.backend != "fem"
+            and ("mechanics" in self.effects)
+        ):
+            self._mechanics = make_backend(self)  # a missing or wrong model fails here, not later
         self._steps_since_reinit = 0
         self._last_mech_key: tuple[bytes, bytes] | None = None
         self._incidence = None  # node-tet volume incidence, built on the first cut
@@ -646,11 +652,22 @@ def make_backend(sim: Simulation) -> MechanicsBackend:
             rtol=cfg.rtol,
             ersatz_ratio=sim.tissue.ersatz_stiffness_ratio,
         )
+    if cfg.backend == "cnn":
+        # torch loads only here: an FEM-only engine never imports it
+        from diathermy.surrogates.backend import CNNBackend, default_model_path
+
+        model = cfg.model if cfg.model is not None else default_model_path(sim.scene.grid)
+        return CNNBackend(
+            sim.disc.mesh,
+            model,
+            poisson_ratio=sim.tissue.poisson_ratio,
+            p0_pa=sim.tissue.p_atm_pa,
+            ersatz_ratio=sim.tissue.ersatz_stiffness_ratio,
+            guard_tolerance=cfg.guard_tolerance,
+        )
     if cfg.backend == "pgd":
         return _pgd_backend(sim)
-    raise SceneError(
-        f"mechanics.backend: {cfg.backend!r} needs a trained model, which is not available yet"
-    )
+    raise SceneError(f"mechanics.backend: unknown backend {cfg.backend!r}")
 
 
 def _pgd_backend(sim: Simulation) -> MechanicsBackend:

@@ -268,6 +268,16 @@ class MechanicsSolver:
         self._krylov.set_operator(K_scaled)
         self.assembly_s = time.perf_counter() - t0
 
+    @property
+    def krylov(self) -> KrylovSolver:
+        """The CG solver of the Jacobi-scaled system D^-1/2 K D^-1/2 (its ``A``, near-nullspace)."""
+        return self._krylov
+
+    @property
+    def scale(self) -> np.ndarray:
+        """D^-1/2 (3 n_nodes,): u = scale * y for the scaled system's solution y."""
+        return self._scale
+
     def load(self, pressure_pa: np.ndarray, p0_pa: float) -> np.ndarray:
         """Right-hand side (3 n_nodes,) of nodal pressure (n_nodes,) in Pa, constraints applied."""
         geom = self.assembler.geom

@@ -33,6 +33,9 @@ class Settings(BaseSettings):
     max_memory_bytes: int = Field(default=4 * 2**30, ge=1)
     max_steps_per_request: int = Field(default=200, ge=1)
     max_sessions_per_token: int = Field(default=8, ge=1)
+    max_active_jobs_per_token: int = Field(
+        default=16, ge=1, description="queued plus running dataset/training jobs per token"
+    )
     max_request_bytes: int = Field(default=1_000_000, ge=1024)
     max_message_bytes: int = Field(default=65_536, ge=256)
     max_stream_rate_hz: float = Field(default=60.0, gt=0)

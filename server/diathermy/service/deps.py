@@ -9,6 +9,7 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
 from diathermy.service.registry import SessionRecord
 from diathermy.service.state import AppState
+from diathermy.worker.queue import JobQueue
 
 bearer = HTTPBearer(auto_error=False, description="a token the server was configured with")
 
@@ -30,6 +31,14 @@ def get_owner(
 
 
 OwnerDep = Annotated[str, Depends(get_owner)]
+
+
+def get_jobs(request: Request) -> JobQueue:
+    """The job queue in the data directory (shared with the workers)."""
+    return request.app.state.diathermy_jobs
+
+
+JobsDep = Annotated[JobQueue, Depends(get_jobs)]
 
 
 def get_session(

@@ -21,10 +21,12 @@ from diathermy.service.exceptions import (
     AuthError,
     BadRequestError,
     LimitExceededError,
+    NotFoundError,
     RequestTooLargeError,
     ServiceError,
     SessionBusyError,
     SessionNotFoundError,
+    TooManyJobsError,
     TooManySessionsError,
 )
 from diathermy.service.schemas import ErrorPublic
@@ -34,8 +36,10 @@ log = logging.getLogger("diathermy.service.errors")
 STATUS: list[tuple[type[Exception], int, str]] = [
     (AuthError, 401, "unauthorized"),
     (SessionNotFoundError, 404, "not_found"),
+    (NotFoundError, 404, "not_found"),
     (SessionBusyError, 409, "busy"),
     (TooManySessionsError, 429, "too_many_sessions"),
+    (TooManyJobsError, 429, "too_many_jobs"),
     (RequestTooLargeError, 413, "too_large"),
     (LimitExceededError, 422, "limit_exceeded"),
     (BadRequestError, 400, "bad_request"),
@@ -78,8 +82,14 @@ async def _validation_error(_request: Request, err: Exception) -> JSONResponse:
     first_field = None
     for e in err.errors():
         loc = ".".join(str(p) for p in e.get("loc", ()))
+        msg = str(e.get("msg", "")).removeprefix("Value error, ")
+        inner = _FIELD.match(msg)  # a model-level check names its field first: 'grid: ...'
+        if inner and e.get("type") == "value_error":
+            loc, msg = f"{loc}.{inner.group(1)}", msg[inner.end() :]
+        elif e.get("type") in ("union_tag_invalid", "union_tag_not_found"):
+            loc = f"{loc}.{str(e.get('ctx', {}).get('discriminator', '')).strip(chr(39))}"
         first_field = first_field or loc
-        problems.append(f"{loc}: {str(e.get('msg', '')).removeprefix('Value error, ')}")
+        problems.append(f"{loc}: {msg}")
     return JSONResponse(
         error_body("validation_error", "; ".join(problems), first_field), status_code=422
     )
@@ -114,11 +124,11 @@ ErrorResponses: dict[int | str, dict[str, object]] = {
     for status, desc in [
         (400, "bad request (e.g. an unknown field name)"),
         (401, "missing or unknown bearer token"),
-        (404, "no such session for this token"),
+        (404, "no such session (job, model) for this token"),
         (409, "the session is busy stepping or restoring"),
         (413, "request body too large"),
         (422, "invalid input or over a limit; 'field' names it"),
-        (429, "too many sessions for this token"),
+        (429, "too many sessions (or active jobs) for this token"),
     ]
 }
 """The error responses every session route documents."""

@@ -37,5 +37,13 @@ class RequestTooLargeError(LimitExceededError):
     """A request body or stream message is larger than allowed."""
 
 
+class NotFoundError(ServiceError, LookupError):
+    """No job or model by that id for the caller."""
+
+
+class TooManyJobsError(LimitExceededError):
+    """The token already has the maximum number of queued and running jobs."""
+
+
 class BadRequestError(ServiceError, ValueError):
     """A request is well-formed but asks for something that does not exist (field, snapshot)."""

@@ -17,10 +17,11 @@ from diathermy.service.errors import install_error_handlers
 from diathermy.service.metrics import ServiceMetrics
 from diathermy.service.middleware import LimitAndLogMiddleware
 from diathermy.service.registry import SessionRegistry
-from diathermy.service.routes import fields, health, reports, scenes, sessions, stream
+from diathermy.service.routes import fields, health, jobs, models, reports, scenes, sessions, stream
 from diathermy.service.sessions import save_dirty
 from diathermy.service.state import AppState
 from diathermy.version import __version__
+from diathermy.worker.queue import JobQueue
 
 log = logging.getLogger("diathermy.service")
 
@@ -71,10 +72,11 @@ def create_app(settings: Settings | None = None, *, engine: EngineAdapter | None
         lifespan=lifespan,
     )
     app.state.diathermy = state
+    app.state.diathermy_jobs = JobQueue(settings.data_dir)
     app.add_middleware(
         LimitAndLogMiddleware, max_bytes=settings.max_request_bytes, metrics=state.metrics
     )
     install_error_handlers(app)
-    for module in (health, scenes, sessions, fields, stream, reports):
+    for module in (health, scenes, sessions, fields, stream, jobs, models, reports):
         app.include_router(module.router)
     return app

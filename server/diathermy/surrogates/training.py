@@ -209,12 +209,15 @@ def train(
     resume: str | os.PathLike[str] | None = None,
     split: tuple[tuple[int, ...], tuple[int, ...]] | None = None,
     progress: bool = True,
+    on_epoch: Callable[[dict[str, float]], None] | None = None,
 ) -> TrainResult:
     """Train a CNN on a dataset file and write the best model (by validation loss) to ``out_path``.
 
     ``split`` = (train scenarios, validation scenarios) overrides the seeded random split (used by
     cross-validation); ``resume`` continues a checkpoint written by this function (same split,
-    same normaliser, its optimizer state and epoch counter).
+    same normaliser, its optimizer state and epoch counter). ``on_epoch(history entry)`` runs on
+    the main rank after each epoch's checkpoint is written (progress; an exception from it stops
+    training with that checkpoint kept, resumable).
     """
     info = read_dataset_info(data_path)
     want_cuda = config.device.startswith("cuda") or (
@@ -231,7 +234,16 @@ def train(
     try:
         with _deterministic(device.type == "cpu"):
             return _train(
-                info, Path(out_path), config, ctx, device, amp_dtype, resume, split, progress
+                info,
+                Path(out_path),
+                config,
+                ctx,
+                device,
+                amp_dtype,
+                resume,
+                split,
+                progress,
+                on_epoch,
             )
     finally:
         if ctx.active and owns_group:
@@ -248,6 +260,7 @@ def _train(
     resume: str | os.PathLike[str] | None,
     split: tuple[tuple[int, ...], tuple[int, ...]] | None,
     progress: bool,
+    on_epoch: Callable[[dict[str, float]], None] | None = None,
 ) -> TrainResult:
     net, state, (train_s, val_s) = _start_state(info, config, resume, split)
     if set(train_s) & set(val_s) or not train_s or not val_s:
@@ -355,6 +368,8 @@ def _train(
                 )
             if ctx.active:
                 dist.barrier()
+            if on_epoch is not None and ctx.is_main:
+                on_epoch(dict(history[-1]))  # after the save: a stop here loses no epoch
     finally:
         bar.close()
     if ctx.is_main and not history and resume is None:  # epochs=0: still write a usable model

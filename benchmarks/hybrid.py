@@ -1,0 +1,314 @@
+"""Hybrid-CNN against FEM on the held-out built-in scenes: accuracy per step and cost per step.
+
+    python benchmarks/hybrid.py [--steps 100] [--scenes fixed-electrode moving-electrode]
+                                [--model PATH] [--guard-tol 0.005] [--jobs 2]
+
+Per scene (each in its own process, ``--jobs`` at a time):
+1. the FEM engine runs the scene; at every step whose mechanics ran, the CNN alone and the CNN
+   with its residual guard are evaluated on exactly that step's (p, phi, topology), and their
+   strain energy W is compared with the FEM's (``relative_strain_energy_error``): the surrogate
+   error, isolated from coupling;
+2. two fully coupled hybrid runs (CNN, CNN + guard) of the same scene; their drift is the same
+   error of W against the FEM run at the same step, plus the cut volumes.
+Times are measured in the same process: the mechanics effect of each run and whole steps; ratios
+FEM / hybrid are medians over the steps where mechanics ran. Writes benchmarks/results/hybrid.md,
+hybrid.png and hybrid.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import resource
+import statistics
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def _peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def run_scene(name: str, steps: int, model: str | None, guard_tol: float) -> dict[str, Any]:
+    """The FEM run with per-step surrogate evaluations, then the coupled hybrid runs."""
+    import torch
+
+    from diathermy.engine.simulation import Simulation
+    from diathermy.physics.strain_energy import (
+        relative_strain_energy_error,
+        strain_energy_density,
+    )
+    from diathermy.runtime import configure_threads
+    from diathermy.scene import builtin_scene
+    from diathermy.surrogates.backend import CNNBackend, default_model_path
+
+    configure_threads()
+    torch.set_num_threads(1)
+    scene = builtin_scene(name).model_copy(update={"steps": steps})
+    fem = Simulation(scene)
+    t = fem.tissue
+    model_path = model or str(default_model_path(scene.grid))
+    kw = dict(
+        poisson_ratio=t.poisson_ratio, p0_pa=t.p_atm_pa, ersatz_ratio=t.ersatz_stiffness_ratio
+    )
+    mesh, grads, tets = fem.disc.mesh, fem.disc.geom.grads, fem.disc.mesh.tets
+    plain = CNNBackend(mesh, model_path, **kw)
+    guarded = CNNBackend(mesh, model_path, guard_tolerance=guard_tol, **kw)
+    rows: list[dict[str, Any]] = []
+    fem_steps: list[dict[str, float]] = []
+    fem_history: dict[int, dict[str, Any]] = {}
+    for _ in range(steps):
+        phi = fem.state["level_set"].copy()
+        E, healthy = fem._youngs()  # the topology the step's mechanics sees
+        rep = fem.step()
+        mech = rep.effects["mechanics"]
+        fem_steps.append({"step": rep.step, "wall_s": rep.wall_s, "mech_s": mech.wall_s})
+        if not mech.ran:
+            continue
+        p = fem.state["pressure"]
+        W_ref = fem.state["strain_energy"]
+        E_eff = E.copy()
+        if fem.mechanics.solver is not None and fem.mechanics.solver.fragments.loose.any():
+            E_eff[fem.mechanics.solver.fragments.loose] = t.ersatz_stiffness_ratio * E.max()
+        row: dict[str, Any] = {
+            "step": rep.step,
+            "time_s": rep.time_s,
+            "fem_mech_s": mech.wall_s,
+            "fem_step_s": rep.wall_s,
+            "fem_iterations": mech.iterations,
+            "max_pressure_pa": rep.max_pressure_pa,
+            "cut_volume_m3": rep.cut_volume_m3,
+        }
+        for label, backend in (("cnn", plain), ("guard", guarded)):
+            t0 = time.perf_counter()
+            out = backend.solve(
+                pressure_pa=p, level_set_m=phi, youngs_modulus_pa=E, healthy=healthy,
+                warm_start=None,
+            )  # fmt: skip
+            row[f"{label}_s"] = time.perf_counter() - t0
+            W = strain_energy_density(grads, tets, out.u, E_eff, t.poisson_ratio)
+            row[f"{label}_error"] = relative_strain_energy_error(W, W_ref)
+            row[f"{label}_residual_before"] = out.extra["residual_before"]
+            row[f"{label}_residual_after"] = out.extra["residual_after"]
+            row[f"{label}_iterations"] = out.iterations
+        rows.append(row)
+        fem_history[rep.step] = {"W": W_ref.copy(), "cut_volume_m3": rep.cut_volume_m3}
+    # coupled runs: the hybrid drives its own cut; compare W with the FEM run step by step
+    coupled = {}
+    for label, tol in (("cnn", None), ("guard", guard_tol)):
+        mech_cfg = {"backend": "cnn", "model": model_path, "guard_tolerance": tol}
+        sim = Simulation(
+            scene.model_copy(update={"mechanics": scene.mechanics.model_copy(update=mech_cfg)})
+        )
+        drift, times = [], []
+        for _ in range(steps):
+            rep = sim.step()
+            mech = rep.effects["mechanics"]
+            times.append(
+                {"step": rep.step, "wall_s": rep.wall_s, "mech_s": mech.wall_s, "ran": mech.ran}
+            )
+            ref = fem_history.get(rep.step)
+            if ref is not None and mech.ran:
+                W = sim.state["strain_energy"]
+                drift.append(
+                    {
+                        "step": rep.step,
+                        "error": relative_strain_energy_error(W, ref["W"]),
+                        "cut_volume_m3": rep.cut_volume_m3,
+                        "fem_cut_volume_m3": ref["cut_volume_m3"],
+                    }
+                )
+        coupled[label] = {"drift": drift, "steps": times}
+    return {
+        "scene": name,
+        "grid": list(scene.grid),
+        "steps": steps,
+        "model": model_path,
+        "guard_tolerance": guard_tol,
+        "rows": rows,
+        "fem_steps": fem_steps,
+        "coupled": coupled,
+        "peak_rss_mb": _peak_rss_mb(),
+    }
+
+
+# ---------------------------------------------------------------------- report
+def _slope_per_s(t: np.ndarray, e: np.ndarray) -> float:
+    return float(np.polyfit(t, e, 1)[0]) if t.size >= 2 else float("nan")
+
+
+def _moving_average(e: np.ndarray, n: int = 10) -> np.ndarray:
+    if e.size < n:
+        return e
+    k = np.ones(n) / n
+    return np.convolve(e, k, mode="valid")
+
+
+def _full_step(part: dict[str, Any], label: str) -> float:
+    s = [x["wall_s"] for x in part["coupled"][label]["steps"] if x["ran"]]
+    return statistics.median(s) if s else float("nan")
+
+
+def write_report(parts: list[dict[str, Any]], out_dir: Path, wall_s: float) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    lines = [
+        "# Hybrid-CNN against FEM (held-out built-in scenes)",
+        "",
+        f"`python benchmarks/hybrid.py --steps {parts[0]['steps']}` on {platform.machine()}, "
+        "2 shared cores (other jobs running: compare ratios, not absolute times). "
+        f"Model `{Path(parts[0]['model']).name}`; guard tolerance {parts[0]['guard_tolerance']} "
+        f"(relative equilibrium residual). {parts[0]['steps']} steps of 0.03 s per scene "
+        "(fewer than the paper's 400, to fit the machine). Whole benchmark "
+        f"{wall_s / 60:.1f} min.",
+        "",
+        "## Surrogate error per step (CNN evaluated on the FEM run's own p, phi and topology)",
+        "",
+        "Strain-energy error = `relative_strain_energy_error(W_cnn, W_fem)` over all tets. "
+        "Slope: linear fit of error vs time (per simulated second); ~0 means no growth.",
+        "",
+        "| scene | grid | mechanics steps | max p (MPa) | CNN max | CNN mean | CNN slope /s | "
+        "CNN+guard max | CNN+guard mean | guard corrections | mean CG its | residual before (median) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for part in parts:
+        r = part["rows"]
+        if not r:
+            lines.append(f"| {part['scene']} | - | 0 | | | | | | | | | |")
+            continue
+        t = np.array([x["time_s"] for x in r])
+        ce = np.array([x["cnn_error"] for x in r])
+        ge = np.array([x["guard_error"] for x in r])
+        its = np.array([x["guard_iterations"] for x in r])
+        g = "x".join(map(str, part["grid"]))
+        lines.append(
+            f"| {part['scene']} | {g} | {len(r)} | {max(x['max_pressure_pa'] for x in r) / 1e6:.2f} | "
+            f"{ce.max():.3f} | {ce.mean():.3f} | {_slope_per_s(t, ce):+.4f} | {ge.max():.4f} | "
+            f"{ge.mean():.4f} | {int((its > 0).sum())}/{len(r)} | {its[its > 0].mean() if (its > 0).any() else 0:.1f} | "
+            f"{statistics.median(x['cnn_residual_before'] for x in r):.3f} |"
+        )
+    lines += [
+        "",
+        "## Coupled hybrid runs: drift against the FEM run",
+        "",
+        "The hybrid drives its own cut; error of its W against the FEM run's W at the same step.",
+        "",
+        "| scene | run | max error | mean error | slope /s | final cut volume (cm^3) | FEM cut volume (cm^3) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for part in parts:
+        for label, c in part["coupled"].items():
+            d = c["drift"]
+            if not d:
+                continue
+            e = np.array([x["error"] for x in d])
+            t = np.array([x["step"] for x in d]) * 0.03
+            lines.append(
+                f"| {part['scene']} | {'CNN' if label == 'cnn' else 'CNN+guard'} | {e.max():.3f} | "
+                f"{e.mean():.3f} | {_slope_per_s(t, e):+.4f} | {d[-1]['cut_volume_m3'] * 1e6:.4f} | "
+                f"{d[-1]['fem_cut_volume_m3'] * 1e6:.4f} |"
+            )
+    lines += [
+        "",
+        "## Cost per step (medians over steps whose mechanics ran; same process, same run)",
+        "",
+        "| scene | grid | FEM mechanics (s) | CNN mechanics (s) | CNN+guard mechanics (s) | FEM / CNN | "
+        "FEM / CNN+guard | FEM full step (s) | hybrid full step (s) | hybrid+guard full step (s) | "
+        "FEM / hybrid (full) | FEM / hybrid+guard (full) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for part in parts:
+        r = part["rows"]
+        if not r:
+            continue
+        fm = statistics.median(x["fem_mech_s"] for x in r)
+        cm = statistics.median(x["cnn_s"] for x in r)
+        gm = statistics.median(x["guard_s"] for x in r)
+        fs = statistics.median(x["fem_step_s"] for x in r)
+
+        hc, hg = _full_step(part, "cnn"), _full_step(part, "guard")
+        g = "x".join(map(str, part["grid"]))
+        lines.append(
+            f"| {part['scene']} | {g} | {fm:.3f} | {cm:.3f} | {gm:.3f} | {fm / cm:.1f}x | {fm / gm:.1f}x | "
+            f"{fs:.3f} | {hc:.3f} | {hg:.3f} | {fs / hc:.1f}x | {fs / hg:.1f}x |"
+        )
+    lines += [
+        "",
+        "Peak memory (resource.getrusage, per scene process): "
+        + ", ".join(f"{p['scene']} {p['peak_rss_mb']:.0f} MB" for p in parts)
+        + ".",
+        "",
+        "![strain-energy error vs time](hybrid.png)",
+        "",
+    ]
+    (out_dir / "hybrid.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+    fig, axes = plt.subplots(1, len(parts), figsize=(6 * len(parts), 4), squeeze=False)
+    for ax, part in zip(axes[0], parts, strict=True):
+        r = part["rows"]
+        if not r:
+            continue
+        t = np.array([x["time_s"] for x in r])
+        for key, label, color in (
+            ("cnn_error", "hybrid-CNN", "C0"),
+            ("guard_error", "CNN + guard", "C2"),
+        ):
+            e = np.array([x[key] for x in r]) * 100
+            ax.plot(t, e, ".", color=color, alpha=0.35, ms=3)
+            ma = _moving_average(e)
+            ax.plot(t[len(t) - ma.size :], ma, "-", color=color, label=f"{label} (moving avg 10)")
+        d = part["coupled"]["cnn"]["drift"]
+        if d:
+            ax.plot([x["step"] * 0.03 for x in d], [x["error"] * 100 for x in d], "--", color="C3",
+                    lw=1, label="coupled hybrid-CNN drift")  # fmt: skip
+        ax.axhline(5, color="k", lw=0.6, ls=":")
+        ax.set_title(f"{part['scene']} ({'x'.join(map(str, part['grid']))})")
+        ax.set_xlabel("time (s)")
+        ax.set_ylabel("strain-energy error (%)")
+        ax.set_yscale("log")
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out_dir / "hybrid.png", dpi=110)
+
+
+def main() -> int:
+    a = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    a.add_argument("--steps", type=int, default=100)
+    a.add_argument("--scenes", nargs="+", default=["fixed-electrode", "moving-electrode"])
+    a.add_argument("--model", help="checkpoint (default: the shipped model of the scene's grid)")
+    a.add_argument("--guard-tol", type=float, default=5e-3)
+    a.add_argument("--jobs", type=int, default=2)
+    a.add_argument("--out", type=Path, default=RESULTS)
+    a.add_argument("--report-only", action="store_true", help="redo the report from hybrid.json")
+    args = a.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    raw = args.out / "hybrid.json"
+    if args.report_only:
+        data = json.loads(raw.read_text())
+        write_report(data["parts"], args.out, data["wall_s"])
+        return 0
+    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        futures = [
+            pool.submit(run_scene, s, args.steps, args.model, args.guard_tol) for s in args.scenes
+        ]
+        parts = [f.result() for f in futures]
+    wall = time.perf_counter() - t0
+    raw.write_text(json.dumps({"parts": parts, "wall_s": wall}), encoding="utf-8")
+    write_report(parts, args.out, wall)
+    print((args.out / "hybrid.md").read_text())
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,229 @@
+"""The hybrid-CNN mechanics backend: the CNN predicts u from (p, phi); a residual guard checks it.
+
+Every step the prediction's relative equilibrium residual ||f - K u|| / ||f|| (free DOFs, the
+FEM operator of the current topology, evaluated matrix-free) is reported; when a guard tolerance
+is set and the residual exceeds it, warm-started preconditioned CG on the FEM system continues
+from the prediction until the residual is below the tolerance (``physics.equilibrium_guard``).
+The model runs on the GPU when there is one, else on the CPU, in inference mode, with its input
+buffer reused across steps.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from diathermy.engine.backends import MechanicsOutput
+from diathermy.errors import CheckpointError, SceneError
+from diathermy.fem.elastic import ElasticAssembler
+from diathermy.fem.geometry import structured_geometry
+from diathermy.mesh import TetMesh
+from diathermy.physics.equilibrium_guard import (
+    GuardPreconditioner,
+    GuardPreconditioners,
+    correct,
+    equilibrium_residual,
+)
+from diathermy.physics.mechanics import MechanicsSolver, clamped_bottom, mechanics_assembler
+from diathermy.surrogates.checkpoint import load_checkpoint
+from diathermy.surrogates.inference import default_device
+
+MODELS_PACKAGE = "diathermy.surrogates.models"
+
+
+def default_model_path(grid_shape: tuple[int, int, int]) -> Path:
+    """The model shipped for grid (nz, ny, nx): ``models/cnn_<nz>x<ny>x<nx>.pt``.
+
+    Raises ``SceneError`` naming the grids that have one when this grid has none.
+    """
+    name = "cnn_{}x{}x{}.pt".format(*(int(n) for n in grid_shape))
+    folder = resources.files(MODELS_PACKAGE)
+    path = Path(str(folder.joinpath(name)))
+    if not path.is_file():
+        shipped = sorted(p.name for p in Path(str(folder)).glob("cnn_*.pt"))
+        grids = ", ".join(n.removeprefix("cnn_").removesuffix(".pt") for n in shipped) or "none"
+        g = "x".join(str(int(n)) for n in grid_shape)
+        raise SceneError(
+            f"mechanics.model: no shipped CNN for grid {g} (shipped grids: {grids}); "
+            f"train one (scripts/train_default_model.sh) and pass it as mechanics.model"
+        )
+    return path
+
+
+class CNNBackend:
+    """``MechanicsBackend`` by the CNN surrogate, with an optional equilibrium guard.
+
+    Args:
+        mesh: the scene's tet mesh (its grid must be the model's).
+        model_path: checkpoint written by ``diathermy train``.
+        poisson_ratio, p0_pa, ersatz_ratio: the material, as for ``FEMBackend``.
+        guard_tolerance: correct predictions whose relative residual exceeds it; None reports
+            the residual only.
+        guard_maxiter: CG iteration cap of one correction.
+        guard_preconditioner: "amg" (hierarchy per topology) or "jacobi" (no setup).
+        device: torch device; default the GPU when there is one.
+    """
+
+    name = "cnn"
+
+    def __init__(
+        self,
+        mesh: TetMesh,
+        model_path: str | os.PathLike[str],
+        *,
+        poisson_ratio: float,
+        p0_pa: float,
+        ersatz_ratio: float,
+        guard_tolerance: float | None = None,
+        guard_maxiter: int = 200,
+        guard_preconditioner: GuardPreconditioner = "amg",
+        device: str | torch.device | None = None,
+        assembler: ElasticAssembler | None = None,
+    ) -> None:
+        if guard_tolerance is not None and not guard_tolerance > 0:
+            raise SceneError(f"mechanics.guard_tolerance: must be > 0, got {guard_tolerance}")
+        self.mesh = mesh
+        self.model_path = Path(model_path)
+        self.device = torch.device(device) if device is not None else default_device()
+        grid = mesh.grid
+        ckpt = load_checkpoint(self.model_path, expected_grid=grid.shape, map_location=self.device)
+        if not np.allclose(ckpt.spacing_m, grid.spacing_m, rtol=1e-6, atol=0.0):
+            raise CheckpointError(
+                f"model {str(self.model_path)!r} was trained for node spacing {ckpt.spacing_m} m, "
+                f"the scene's grid has {grid.spacing_m} m (another block size)"
+            )
+        self.model = ckpt.model.eval()
+        self.metrics = ckpt.metrics
+        self.poisson_ratio = float(poisson_ratio)
+        self.p0_pa = float(p0_pa)
+        self.ersatz_ratio = float(ersatz_ratio)
+        self.guard_tolerance = guard_tolerance
+        self.guard_maxiter = int(guard_maxiter)
+        self._assembler = assembler  # built on the first correction: a pure CNN never needs it
+        self._preconditioners = GuardPreconditioners(guard_preconditioner)
+        self._geom = (
+            assembler.geom
+            if assembler is not None
+            else structured_geometry(mesh.points, mesh.tets, mesh.shape_id)
+        )
+        self._free = ~clamped_bottom(mesh).mask(3 * mesh.n_nodes).reshape(-1, 3)
+        self._input = torch.empty((1, 2, *grid.shape), dtype=torch.float32, device=self.device)
+        self._solver: MechanicsSolver | None = None
+        self._E: np.ndarray | None = None
+        self.n_predictions = 0
+        self.n_corrections = 0
+        self.n_builds = 0
+
+    # ------------------------------------------------------------------ the network
+    def predict(self, pressure_pa: np.ndarray, level_set_m: np.ndarray) -> np.ndarray:
+        """Nodal p (n_nodes,) Pa and phi (n_nodes,) m -> u (n_nodes, 3) m, clamped bottom held."""
+        shape = self.mesh.grid.shape
+        norm = self.model.normalizer
+        with torch.inference_mode():
+            x = self._input
+            x[0, 0].copy_(torch.from_numpy(np.asarray(pressure_pa, np.float32).reshape(shape)))
+            x[0, 1].copy_(torch.from_numpy(np.asarray(level_set_m, np.float32).reshape(shape)))
+            x[0, 0].sub_(norm.p0_pa).div_(norm.pressure_scale_pa)
+            x[0, 1].div_(norm.level_set_scale_m)
+            y = self.model(x)[0].mul_(norm.displacement_scale_m)
+            u = y.permute(1, 2, 3, 0).reshape(-1, 3).to("cpu", torch.float64).numpy()
+        u = np.array(u)  # own the memory: torch may reuse it
+        u[~self._free] = 0.0
+        self.n_predictions += 1
+        return u
+
+    # ------------------------------------------------------------------ the FEM operator
+    def operator_for(
+        self, youngs_modulus_pa: np.ndarray, healthy: np.ndarray
+    ) -> tuple[MechanicsSolver, bool]:
+        """The FEM solver of this topology, rebuilt only when E changed; (solver, rebuilt)."""
+        if self._solver is not None and np.array_equal(self._E, youngs_modulus_pa):
+            return self._solver, False
+        if self._assembler is None:
+            self._assembler = mechanics_assembler(self.mesh)
+        self._solver = MechanicsSolver(
+            self.mesh,
+            youngs_modulus_pa,
+            self.poisson_ratio,
+            healthy=healthy,
+            ersatz_ratio=self.ersatz_ratio,
+            rtol=min(self.guard_tolerance or 1e-6, 1e-6),
+            assembler=self._assembler,
+        )
+        self._E = youngs_modulus_pa.copy()
+        self.n_builds += 1
+        return self._solver, True
+
+    # ------------------------------------------------------------------ MechanicsBackend
+    def solve(
+        self,
+        *,
+        pressure_pa: np.ndarray,
+        level_set_m: np.ndarray,
+        youngs_modulus_pa: np.ndarray,
+        healthy: np.ndarray,
+        warm_start: np.ndarray | None,
+    ) -> MechanicsOutput:
+        """Predict u, measure its residual, correct it when the guard says so."""
+        t0 = time.perf_counter()
+        u = self.predict(pressure_pa, level_set_m)
+        t1 = time.perf_counter()
+        before = equilibrium_residual(
+            self._geom,
+            self.mesh.tets,
+            u,
+            pressure_pa,
+            self.p0_pa,
+            youngs_modulus_pa,
+            self.poisson_ratio,
+            healthy,
+            self._free,
+        )
+        t2 = time.perf_counter()
+        extra: dict[str, float | int | bool | str] = {
+            "cnn_s": t1 - t0,
+            "residual_s": t2 - t1,
+            "residual_before": before,
+            "residual_after": before,
+            "guard_tolerance": self.guard_tolerance if self.guard_tolerance is not None else 0.0,
+            "guard_iterations": 0,
+            "corrected": False,
+            "device": self.device.type,
+        }
+        tol = self.guard_tolerance
+        if tol is None or before <= tol:
+            return MechanicsOutput(u=u, iterations=0, residual=before, extra=extra)
+        solver, rebuilt = self.operator_for(youngs_modulus_pa, healthy)
+        t3 = time.perf_counter()
+        corr = correct(
+            solver,
+            u,
+            pressure_pa,
+            self.p0_pa,
+            tol=tol,
+            maxiter=self.guard_maxiter,
+            preconditioner=self._preconditioners,
+        )
+        self.n_corrections += 1
+        loose = solver.fragments.loose
+        extra.update(
+            operator_s=t3 - t2,
+            guard_setup_s=corr.setup_s,
+            guard_solve_s=corr.solve_s,
+            residual_after=corr.residual_after,
+            guard_iterations=corr.iterations,
+            corrected=True,
+        )
+        return MechanicsOutput(
+            u=corr.u,
+            iterations=corr.iterations,
+            residual=corr.residual_after,
+            rebuilt=rebuilt,
+            loose_tets=loose if loose.any() else None,
+            extra=extra,
+        )

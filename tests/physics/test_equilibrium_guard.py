@@ -1,0 +1,99 @@
+"""The equilibrium guard: matrix-free K u against the assembled K, residuals, CG correction."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from diathermy.fem.geometry import structured_geometry
+from diathermy.mesh import Grid, build_tet_mesh
+from diathermy.physics.equilibrium_guard import (
+    GuardPreconditioners,
+    correct,
+    equilibrium_residual,
+    internal_force,
+)
+from diathermy.physics.mechanics import MechanicsSolver
+from diathermy.physics.strain_energy import relative_strain_energy_error, strain_energy_density
+
+P0 = 101325.0
+NU = 0.4
+
+
+@pytest.fixture(scope="module")
+def problem():  # noqa: ANN201
+    """A 5x6x9 block, a stiff/ersatz E pattern, a pressure bump; FEM solved to rtol 1e-12."""
+    mesh = build_tet_mesh(Grid((5, 6, 9), size_m=(0.02, 0.01, 0.01)))
+    geom = structured_geometry(mesh.points, mesh.tets, mesh.shape_id)
+    rng = np.random.default_rng(3)
+    centroid_z = mesh.points[mesh.tets].mean(axis=1)[:, 2]
+    healthy = ~((centroid_z > 0.008) & (rng.uniform(size=mesh.n_tets) < 0.5))
+    E = np.where(healthy, 2.7e5, 0.27)
+    x, y, z = mesh.points.T
+    p = P0 + 3e5 * np.exp(-((x - 0.01) ** 2 + (y - 0.005) ** 2 + (z - 0.01) ** 2) / 2e-5)
+    solver = MechanicsSolver(mesh, E, NU, healthy=healthy, rtol=1e-12)
+    assert solver.fragments.loose.any()  # the pattern leaves loose bits: the solver removes them
+    u = solver.solve(p, P0).u
+    free = ~solver.constrained.reshape(-1, 3)
+    # the operator's own E and healthy mask (loose fragments at the ersatz level)
+    return mesh, geom, solver.youngs_modulus_pa, solver.healthy, p, solver, u, free
+
+
+def test_internal_force_is_the_assembled_stiffness_times_u(problem) -> None:  # noqa: ANN001
+    mesh, geom, E, _, _, solver, _, free = problem
+    u = np.random.default_rng(0).normal(size=(mesh.n_nodes, 3)) * 1e-5
+    u[~free] = 0.0  # K's constrained rows are identity-like: compare free DOFs of a clamped u
+    reference = (solver.K @ u.ravel()).reshape(-1, 3)
+    got = internal_force(geom, mesh.tets, u, E, NU)
+    np.testing.assert_allclose(
+        got[free], reference[free], rtol=1e-9, atol=1e-12 * abs(reference).max()
+    )
+
+
+def test_residual_is_zero_at_equilibrium_and_scales_with_the_error(problem) -> None:  # noqa: ANN001
+    mesh, geom, E, healthy, p, _, u, free = problem
+    args = (p, P0, E, NU, healthy, free)
+    assert equilibrium_residual(geom, mesh.tets, u, *args) < 1e-9
+    # K (1.1 u) - f = 0.1 K u = 0.1 f: the relative residual is exactly 0.1
+    assert equilibrium_residual(geom, mesh.tets, 1.1 * u, *args) == pytest.approx(0.1, rel=1e-6)
+    zero = np.zeros_like(u)
+    assert (
+        equilibrium_residual(geom, mesh.tets, zero, np.full_like(p, P0), P0, E, NU, healthy, free)
+        == 0.0
+    )
+
+
+@pytest.mark.parametrize("kind", ["amg", "jacobi"])
+def test_correction_reaches_the_tolerance_and_cuts_the_energy_error(problem, kind) -> None:  # noqa: ANN001
+    mesh, geom, E, healthy, p, solver, u, free = problem
+    rng = np.random.default_rng(1)
+    u0 = u * (1 + 0.3 * rng.normal(size=u.shape))  # a poor surrogate: 30 % noise per DOF
+    W_ref = strain_energy_density(geom.grads, mesh.tets, u, E, NU)
+    before = relative_strain_energy_error(
+        strain_energy_density(geom.grads, mesh.tets, u0, E, NU), W_ref
+    )
+    c = correct(solver, u0, p, P0, tol=1e-3, maxiter=500, preconditioner=GuardPreconditioners(kind))
+    assert c.residual_before > 1e-2
+    assert c.residual_after <= 1e-3
+    assert c.residual_after == pytest.approx(
+        equilibrium_residual(geom, mesh.tets, c.u, p, P0, E, NU, healthy, free), rel=1e-6
+    )
+    assert 0 < c.iterations < 500
+    after = relative_strain_energy_error(
+        strain_energy_density(geom.grads, mesh.tets, c.u, E, NU), W_ref
+    )
+    assert after < 0.1 * before
+    assert np.all(c.u[~free] == 0.0)
+
+
+def test_no_iterations_when_the_start_already_passes(problem) -> None:  # noqa: ANN001
+    _, _, _, _, p, solver, u, _ = problem
+    c = correct(
+        solver, u, p, P0, tol=1e-3, maxiter=50, preconditioner=GuardPreconditioners("jacobi")
+    )
+    assert c.iterations == 0 and c.residual_after < 1e-9
+
+
+def test_unknown_preconditioner_is_refused() -> None:
+    with pytest.raises(ValueError, match="amg"):
+        GuardPreconditioners("ilu")  # type: ignore[arg-type]

@@ -1,0 +1,165 @@
+"""The hybrid-CNN backend: agreement with FEM, the guard, model errors, the engine end to end."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from diathermy.cli import main
+from diathermy.engine.simulation import Simulation
+from diathermy.errors import CheckpointError, SceneError
+from diathermy.fem.geometry import structured_geometry
+from diathermy.physics.strain_energy import relative_strain_energy_error, strain_energy_density
+from diathermy.surrogates.backend import CNNBackend, default_model_path
+from diathermy.surrogates.checkpoint import load_checkpoint
+from tests.engine.scenes import tiny_scene
+from tests.surrogates.hybrid_helpers import (
+    GRID,
+    FemSample,
+    fem_sample,
+    overfit_model,
+    untrained_model,
+)
+
+NU = 0.4
+P0 = 101325.0
+
+
+@pytest.fixture(scope="module")
+def sample() -> FemSample:
+    return fem_sample()
+
+
+@pytest.fixture(scope="module")
+def fitted(sample: FemSample, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return overfit_model(sample, tmp_path_factory.mktemp("hybrid") / "fitted.pt")
+
+
+def _backend(path: Path, sample: FemSample, tol: float | None) -> CNNBackend:
+    return CNNBackend(
+        sample.mesh, path, poisson_ratio=NU, p0_pa=P0, ersatz_ratio=1e-6, guard_tolerance=tol
+    )
+
+
+def _step(backend: CNNBackend, s: FemSample):  # noqa: ANN202
+    return backend.solve(
+        pressure_pa=s.pressure_pa,
+        level_set_m=s.level_set_m,
+        youngs_modulus_pa=s.youngs_modulus_pa,
+        healthy=s.healthy,
+        warm_start=None,
+    )
+
+
+def _se_error(s: FemSample, u: np.ndarray) -> float:
+    geom = structured_geometry(s.mesh.points, s.mesh.tets, s.mesh.shape_id)
+    W = strain_energy_density(geom.grads, s.mesh.tets, u, s.youngs_modulus_pa, NU)
+    W_ref = strain_energy_density(geom.grads, s.mesh.tets, s.u, s.youngs_modulus_pa, NU)
+    return relative_strain_energy_error(W, W_ref)
+
+
+def test_step_agrees_with_fem_on_its_training_sample(
+    sample: FemSample, fitted: Path, tmp_path: Path
+) -> None:
+    out = _step(_backend(fitted, sample, None), sample)
+    rel_u = np.linalg.norm(out.u - sample.u) / np.linalg.norm(sample.u)
+    untrained = _step(_backend(untrained_model(tmp_path / "u.pt"), sample, None), sample)
+    # a width-8 net fit in 100 L-BFGS iterations: close, not exact (the guard makes it exact)
+    assert rel_u < 0.25
+    assert _se_error(sample, out.u) < 0.5 < _se_error(sample, untrained.u)
+    assert out.extra["corrected"] is False and out.iterations == 0
+    assert out.residual == out.extra["residual_before"] > 0
+    assert np.all(out.u[sample.mesh.side_nodes("z-")] == 0.0)  # the clamped bottom is held
+
+
+def test_guard_brings_the_residual_under_tolerance_and_the_energy_error_down(
+    sample: FemSample, fitted: Path
+) -> None:
+    plain = _step(_backend(fitted, sample, None), sample)
+    backend = _backend(fitted, sample, 1e-3)
+    out = _step(backend, sample)
+    assert out.extra["residual_before"] == pytest.approx(plain.residual) and plain.residual > 1e-3
+    assert out.extra["corrected"] is True and out.extra["residual_after"] <= 1e-3
+    assert out.residual == out.extra["residual_after"]
+    assert 0 < out.iterations == out.extra["guard_iterations"] < 50
+    assert _se_error(sample, out.u) < 1e-2 < _se_error(sample, plain.u)
+    again = _step(backend, sample)  # same topology: the operator is reused
+    assert again.rebuilt is False and backend.n_builds == 1
+
+
+def test_model_for_another_grid_or_corrupt_file_is_refused(
+    sample: FemSample, tmp_path: Path
+) -> None:
+    other = untrained_model(tmp_path / "other.pt", grid=(5, 5, 9))
+    with pytest.raises(CheckpointError, match=r"trained for grid 5x5x9 .* the scene uses 9x9x17"):
+        _backend(other, sample, None)
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(b"not a checkpoint at all")
+    with pytest.raises(CheckpointError, match="not a readable diathermy CNN checkpoint"):
+        _backend(bad, sample, None)
+    with pytest.raises(CheckpointError, match="does not exist"):
+        _backend(tmp_path / "missing.pt", sample, None)
+
+
+def test_model_for_another_block_size_is_refused(tmp_path: Path) -> None:
+    from diathermy.mesh import Grid, build_tet_mesh
+
+    model = untrained_model(tmp_path / "m.pt")  # 9x9x17 on the 2 x 1 x 1 cm block
+    mesh = build_tet_mesh(Grid(GRID, size_m=(0.2, 0.1, 0.1)))
+    with pytest.raises(CheckpointError, match="node spacing"):
+        CNNBackend(mesh, model, poisson_ratio=NU, p0_pa=P0, ersatz_ratio=1e-6)
+
+
+def test_no_shipped_model_for_a_grid_names_the_shipped_ones() -> None:
+    with pytest.raises(
+        SceneError, match=r"no shipped CNN for grid 9x9x17 \(shipped grids: 33x33x65\)"
+    ):
+        default_model_path(GRID)
+
+
+def test_cli_reports_a_bad_model_in_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    scene = tmp_path / "tiny.json"
+    scene.write_text(tiny_scene().model_dump_json())
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(b"\x00" * 64)
+    argv = ["simulate", str(scene), "--mechanics", "cnn", "--model", str(bad)]
+    code = main([*argv, "--out", str(tmp_path / "run.h5"), "--steps", "2", "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert len(err.splitlines()) == 1 and "bad.pt" in err and "checkpoint" in err
+
+
+def test_engine_with_cnn_runs_end_to_end_and_tracks_fem(fitted: Path) -> None:
+    steps = 9  # boils by step ~5; no cut yet, so both runs see the same p and phi
+    fem = Simulation(tiny_scene(steps=steps))
+    hybrid = Simulation(
+        tiny_scene(
+            steps=steps, mechanics={"backend": "cnn", "model": str(fitted), "guard_tolerance": 1e-3}
+        )
+    )
+    assert hybrid.mechanics.name == "cnn"
+    fem.run(steps)
+    reports = hybrid.run(steps)
+    mech = [r.effects["mechanics"] for r in reports if r.ran("mechanics")]
+    assert len(mech) >= 2
+    assert all(m.extra["backend"] == "cnn" and m.extra["residual_after"] <= 1e-3 for m in mech)
+    W, W_ref = hybrid.state["strain_energy"], fem.state["strain_energy"]
+    assert np.all(np.isfinite(W)) and W_ref.max() > 0
+    assert relative_strain_energy_error(W, W_ref) < 1e-2
+
+
+def test_shipped_default_model_loads_for_the_default_grid() -> None:
+    from diathermy.scene import Scene
+
+    grid = Scene().grid
+    path = default_model_path(grid)
+    ckpt = load_checkpoint(path, expected_grid=grid)
+    assert ckpt.grid_shape == (33, 33, 65) and ckpt.model.config.width <= 16
+    assert path.stat().st_size < 1_000_000
+    metrics = json.loads(path.with_suffix(".json").read_text())
+    assert 0 <= metrics["validation"]["mean_strain_energy_error"] < 1.0
