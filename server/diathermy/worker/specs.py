@@ -16,12 +16,12 @@ from diathermy.errors import SceneError
 MODEL_NAME_PATTERN = r"^[a-z0-9][a-z0-9_-]{0,63}$"
 
 
-class JobKind(str, Enum):
+class JobKind(str, Enum):  # noqa: UP042 (str() of members stays as before)
     dataset = "dataset"
     training = "training"
 
 
-class JobState(str, Enum):
+class JobState(str, Enum):  # noqa: UP042
     """A job's lifecycle: queued -> running -> succeeded | failed | cancelled."""
 
     queued = "queued"
