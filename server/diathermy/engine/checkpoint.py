@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 from dataclasses import asdict
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import h5py
 import numpy as np
@@ -80,12 +80,7 @@ def load_checkpoint(path: str | Path) -> Simulation:
             scene = Scene.model_validate_json(f.attrs["scene"])
             step, time_s = int(f.attrs["step"]), float(f.attrs["time_s"])
             energy = json.loads(f.attrs["energy_j"])
-            overrides = {
-                k: ElectrodeOverride(
-                    **{kk: (tuple(vv) if isinstance(vv, list) else vv) for kk, vv in v.items()}
-                )
-                for k, v in json.loads(f.attrs["overrides"]).items()
-            }
+            overrides = {k: _override(v) for k, v in json.loads(f.attrs["overrides"]).items()}
             arrays = {k: v[()] for k, v in f["state"].items()}
             solver = {k: v[()] for k, v in f["solver"].items()}
             reinit = int(f.attrs["steps_since_reinit"])
@@ -114,3 +109,14 @@ def load_checkpoint(path: str | Path) -> Simulation:
     )
     sim.restore_solver_state(solver, steps_since_reinit=reinit, mechanics_current=mech_current)
     return sim
+
+
+def _override(d: dict[str, Any]) -> ElectrodeOverride:
+    """An electrode override from its JSON form (lists back to tuples)."""
+    pos = d.get("position_m")
+    return ElectrodeOverride(
+        position_m=None if pos is None else (float(pos[0]), float(pos[1])),
+        power_w=d.get("power_w"),
+        current_density_a_per_m2=d.get("current_density_a_per_m2"),
+        active=d.get("active"),
+    )

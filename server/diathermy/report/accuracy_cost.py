@@ -190,7 +190,7 @@ def accuracy_cost_report(
     ctx = mp.get_context("spawn")  # a fresh interpreter per variant: its peak memory is its own
     bar = tqdm(total=len(jobs), disable=not progress, unit="variant", desc="accuracy-cost")
     for scene in scenes:
-        grids = sorted({v.grid or tuple(scene.grid) for v in variants}, key=lambda g: np.prod(g))
+        grids = sorted({v.grid or scene.grid for v in variants}, key=lambda g: int(np.prod(g)))
         finest_grid = grids[-1]
         with ProcessPoolExecutor(max_workers=1, mp_context=ctx, max_tasks_per_child=1) as pool:
             finest = _run(scene, reference_for(Variant("f", grid=finest_grid)), steps, out, pool)

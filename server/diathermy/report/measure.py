@@ -58,7 +58,7 @@ def run_variant(scene_json: str, variant: Variant, steps: int, key: str, fields_
 
     configure_threads()
     scene = variant.apply(Scene.model_validate_json(scene_json), steps)
-    rec = RunRecord(scene=scene.name, variant=variant, key=key, steps=steps, grid=tuple(scene.grid))
+    rec = RunRecord(scene=scene.name, variant=variant, key=key, steps=steps, grid=scene.grid)
     try:
         t0 = time.perf_counter()
         sim = Simulation(scene)

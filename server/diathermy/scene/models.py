@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from diathermy.physics.materials import Tissue
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION: Literal[1] = 1
 
 EFFECTS = (
     "electric",
@@ -31,6 +32,14 @@ Effect = Literal[
     "thermal_damage",
 ]
 
+DEFAULT_EFFECTS: tuple[Effect, ...] = (
+    "electric",
+    "thermal",
+    "vaporization",
+    "mechanics",
+    "dissection",
+)
+
 REQUIRES: dict[str, tuple[str, ...]] = {
     "electric": (),
     "thermal": (),
@@ -47,7 +56,7 @@ NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 
 
-def close_effects(effects: list[str] | tuple[str, ...]) -> tuple[str, ...]:
+def close_effects(effects: Sequence[str]) -> tuple[str, ...]:
     """The effects plus everything they need, in run order."""
     wanted = set(effects)
     stack = list(effects)
@@ -145,9 +154,7 @@ class Scene(_Model):
     electrodes: list[Electrode] = Field(default_factory=lambda: [Electrode()])
     dt_s: Annotated[float, Field(gt=0, le=10.0)] = 0.03
     steps: Annotated[int, Field(ge=0)] = 100
-    effects: list[Effect] = Field(
-        default_factory=lambda: ["electric", "thermal", "vaporization", "mechanics", "dissection"]
-    )
+    effects: list[Effect] = Field(default_factory=lambda: list(DEFAULT_EFFECTS))
     solver: SolverConfig = SolverConfig()
     mechanics: MechanicsConfig = MechanicsConfig()
     level_set: LevelSetConfig = LevelSetConfig()

@@ -142,7 +142,11 @@ class CNNBackend:
         self, youngs_modulus_pa: np.ndarray, healthy: np.ndarray
     ) -> tuple[MechanicsSolver, bool]:
         """The FEM solver of this topology, rebuilt only when E changed; (solver, rebuilt)."""
-        if self._solver is not None and np.array_equal(self._E, youngs_modulus_pa):
+        if (
+            self._solver is not None
+            and self._E is not None
+            and np.array_equal(self._E, youngs_modulus_pa)
+        ):
             return self._solver, False
         if self._assembler is None:
             self._assembler = mechanics_assembler(self.mesh)
