@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import shutil
 from pathlib import Path
 from typing import Any
@@ -30,7 +31,7 @@ def _cmd(args: argparse.Namespace) -> int:
     from diathermy.cli import parse_grid, resolve_scene
     from diathermy.report.accuracy_cost import accuracy_cost_report
     from diathermy.report.budget import PACKAGED_REPORT
-    from diathermy.report.variants import Variant, default_variants
+    from diathermy.report.variants import default_variants
 
     scenes = [resolve_scene(s) for s in args.scenes.split(",")]
     if args.grid:
@@ -39,10 +40,7 @@ def _cmd(args: argparse.Namespace) -> int:
     variants = default_variants(_models(args.model or []))
     if args.coarse_grid:
         cg = parse_grid(args.coarse_grid)
-        variants = [
-            Variant(v.name, v.backend, v.rtol, cg, v.model, v.guard_tolerance) if v.grid else v
-            for v in variants
-        ]
+        variants = [dataclasses.replace(v, grid=cg) if v.grid else v for v in variants]
     if args.variants:
         wanted = set(args.variants.split(","))
         unknown = wanted - {v.name for v in variants}
@@ -77,7 +75,7 @@ def add_report_parser(subparsers: Any) -> None:
     )
     s.add_argument("--grid", help="run the scenes on this grid (NZxNYxNX) instead of their own")
     s.add_argument(
-        "--coarse-grid", default=None, help="grid of the coarse-grid variant (default 9x9x17)"
+        "--coarse-grid", default=None, help="grid of the coarse-grid variant (default 17x17x33)"
     )
     s.add_argument("--steps", type=int, default=80, help="steps per run (default 80)")
     s.add_argument(

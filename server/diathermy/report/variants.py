@@ -24,6 +24,7 @@ class Variant:
     grid: tuple[int, int, int] | None = None  # None: the scene's grid
     model: str | None = None
     guard_tolerance: float | None = None
+    coupling: Literal["staggered", "monolithic"] = "staggered"
 
     def apply(self, scene: Scene, steps: int) -> Scene:
         """The scene as this variant runs it."""
@@ -31,6 +32,7 @@ class Variant:
         data["steps"] = steps
         if self.grid is not None:
             data["grid"] = list(self.grid)
+        data["solver"] = {**data["solver"], "coupling": self.coupling}
         data["mechanics"] = {
             **data["mechanics"],
             "backend": self.backend,
@@ -63,21 +65,28 @@ def _grid_name(grid: tuple[int, int, int] | None) -> str:
 
 
 def default_variants(models: dict[str, str] | None = None) -> list[Variant]:
-    """FEM at three tolerances on the scene grid and a coarser grid, plus the surrogates given.
+    """FEM at four tolerances, monolithic coupling and a coarser grid, plus the surrogates given.
 
     ``models`` maps variant names to model files, e.g. {"cnn-w16": "model.pt", "pgd-15": "pgd.npz"};
     a name starting with "cnn" runs the CNN backend (also with the guard), "pgd" the PGD one.
     """
     out = [
+        Variant("fem-rtol1e-2", rtol=1e-2),
         Variant("fem-rtol1e-4", rtol=1e-4),
         Variant("fem-rtol1e-6", rtol=1e-6),
         Variant("fem-rtol1e-8", rtol=1e-8),
-        Variant("fem-coarse-rtol1e-6", rtol=1e-6, grid=(9, 9, 17)),
+        Variant("fem-rtol1e-6-monolithic", rtol=1e-6, coupling="monolithic"),
+        Variant("fem-coarse-rtol1e-6", rtol=1e-6, grid=(17, 17, 33)),
     ]
     for name, path in (models or {}).items():
         if name.startswith("cnn"):
             out.append(Variant(name, backend="cnn", model=path))
-            out.append(Variant(f"{name}+guard", backend="cnn", model=path, guard_tolerance=1e-3))
+            out.append(
+                Variant(f"{name}+guard1e-2", backend="cnn", model=path, guard_tolerance=1e-2)
+            )
+            out.append(
+                Variant(f"{name}+guard1e-4", backend="cnn", model=path, guard_tolerance=1e-4)
+            )
         elif name.startswith("pgd"):
             out.append(Variant(name, backend="pgd", model=path))
     return out
