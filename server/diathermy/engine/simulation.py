@@ -268,11 +268,21 @@ class Simulation:
         return sigma
 
     def _contact(self, pose: ElectrodePose) -> ContactWeights | None:
-        """The contact disk of an electrode, on the healthy surface below it; None when off the block."""
+        """The contact disk of an electrode, on the healthy surface below it.
+
+        None when the disk lies off the block, or when the cut under its centre reaches the
+        bottom (the return electrode): no tissue is left between the electrodes.
+        """
         x, y = pose.position_m
         z = self.top_z
         if "dissection" in self.effects and st_has_cut(self.state):
-            z = float(contact_height(self.disc.to_grid(self.state["level_set"]), self.grid, x, y))
+            g = self.grid
+            # a centre just off an edge still touches with part of its disk: use the nearest column
+            (x0, y0, z0), (lx, ly, _) = g.origin_m, g.size_m
+            xc, yc = min(max(x, x0), x0 + lx), min(max(y, y0), y0 + ly)
+            z = float(contact_height(self._contact_level_set(), g, xc, yc))
+            if z <= z0 + 1e-9 * max(g.size_m):
+                return None
         key = (x, y, z, pose.radius_m)
         if key not in self._contacts:
             try:
@@ -280,6 +290,20 @@ class Simulation:
             except SceneError:
                 return None
         return self._contacts[key]
+
+    def _contact_level_set(self) -> np.ndarray:
+        """phi (nz, ny, nx) in m as the electrode sees it: a loose fragment has fallen away.
+
+        The level set still counts a fragment cut loose from the bottom as tissue (phi > 0), but
+        its tets are removed; nodes with no healthy tet around them get phi < 0 here, so the
+        contact drops to the healthy surface below instead of riding the fragment.
+        """
+        phi = self.state["level_set"]
+        if self.topology is not None and self.topology.loose.any():
+            tets = self.disc.mesh.tets[~self.state["removed"]]
+            held = np.bincount(tets.ravel(), minlength=self.disc.n_nodes) > 0
+            phi = np.where(held, phi, np.minimum(phi, -np.abs(phi) - 1e-12))
+        return self.disc.to_grid(phi)
 
     def _step_electric(
         self, poses: list[ElectrodePose], dt: float, rep: StepReport, T_old: np.ndarray
@@ -295,7 +319,11 @@ class Simulation:
         if not contacts:
             st["potential"] = np.zeros(self.disc.n_nodes)
             st["joule_heat"] = np.zeros(self.disc.n_tets)
-            return EffectReport(False, "no active electrode in contact with the tissue")
+            return EffectReport(
+                False,
+                "no active electrode in contact with the tissue (off the block, or cut through "
+                "to the return electrode)",
+            )
         contact, drive = _combined(contacts)
         sigma = self._conductivity()
         self.calls["electric"] += 1
