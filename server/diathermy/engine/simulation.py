@@ -574,6 +574,8 @@ class Simulation:
                 out["potential_unit_V"], out["potential_unit_load"] = V1, load1
                 out["potential_unit_R"] = np.asarray(R)
                 out["potential_contact_key"] = np.asarray(key)
+                # the conductivity V1 was solved with: the cut may have changed it since
+                out["potential_sigma"] = np.asarray(self.potential.solver.sigma)
         return out
 
     def restore_solver_state(
@@ -594,7 +596,8 @@ class Simulation:
             x, y, z, r = (float(v) for v in solver["potential_contact_key"])
             contact = contact_weights(self.disc.mesh, (x, y, z), r)
             self._contacts = {(x, y, z, r): contact}
-            self.potential.solver.set_conductivity(self._conductivity())
+            sigma = solver.get("potential_sigma")
+            self.potential.solver.set_conductivity(self._conductivity() if sigma is None else sigma)
             self.potential.restore_unit_field(
                 contact,
                 (
