@@ -18,5 +18,12 @@ def configure_threads() -> None:
     global _applied
     if _applied:
         return
-    threadpool_limits(int(os.environ.get("DIATHERMY_BLAS_THREADS", "1")))
+    n = os.environ.get("DIATHERMY_BLAS_THREADS", "1")
+    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, n)  # for pools loaded later (threadpoolctl sees loaded ones)
+    # scipy ships its own OpenBLAS, loaded with scipy.linalg: load it now so the limit reaches it
+    # (unlimited, pyamg's dense coarse solve (pinv) ran up to 40x slower on a busy 2-core machine)
+    import scipy.linalg  # noqa: F401
+
+    threadpool_limits(int(n))
     _applied = True

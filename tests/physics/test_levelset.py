@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from diathermy.errors import SolverDivergedError
 from diathermy.mesh import Grid, build_tet_mesh
 from diathermy.physics.levelset import (
+    GHOST_SLOPE_CAP,
     LevelSetParams,
     _godunov_gradient,
     _stencil,
@@ -57,7 +58,8 @@ def order(errors: list[float], hs: list[float]) -> list[float]:
 
 
 def reference_step(phi: np.ndarray, F: np.ndarray, spacing, dt: float) -> np.ndarray:
-    """One forward-Euler Godunov step, node by node, with linearly extrapolated ghost nodes."""
+    """One forward-Euler Godunov step, node by node, with linearly extrapolated ghost nodes
+    (slope capped at GHOST_SLOPE_CAP)."""
     h = (spacing[2], spacing[1], spacing[0])
     out = phi.copy()
     for idx in np.ndindex(phi.shape):
@@ -78,6 +80,10 @@ def reference_step(phi: np.ndarray, F: np.ndarray, spacing, dt: float) -> np.nda
                 else 2 * c - phi[tuple(np.array(idx) - e)]
             )
             dm, dp = (c - left) / h[ax], (right - c) / h[ax]
+            if idx[ax] == 0:  # the ghost's slope is capped at a distance's
+                dm = min(dm, GHOST_SLOPE_CAP)
+            if idx[ax] == n - 1:
+                dp = max(dp, -GHOST_SLOPE_CAP)
             g2 += max(dm, 0.0, -dp) ** 2
         out[idx] = phi[idx] - dt * F[idx] * np.sqrt(g2)
     return out
@@ -231,6 +237,23 @@ def test_substeps_keep_a_step_100x_above_cfl_bounded():
     st_ = _stencil(phi0.shape, np.arange(phi0.size))
     raw = phi0.ravel() - dt * F * _godunov_gradient(phi0.ravel(), st_, (h, h, h))
     assert raw.min() < phi0.min() - 5 * h
+
+
+def test_a_face_node_ahead_of_the_interior_does_not_run_away():
+    """F > 0 on the top layer only, a step of 57 sub-steps: the top falls by exactly F dt.
+
+    The ghost's slope is capped at 1 (a distance's); uncapped, the top node fell by a factor
+    (1 + dt_sub F / h) per sub-step (-1e81 m after one 1 s engine step).
+    """
+    g = column_grid(9)
+    phi = initial_level_set(g)
+    speed = np.zeros(g.shape)
+    speed[-1] = 1e-3
+    step = advance(phi, speed, g.spacing_m, 10.0)
+    assert step.n_substeps > 50
+    assert np.all(np.isfinite(step.phi))
+    assert step.phi[-1] == pytest.approx(np.full(g.shape[1:], -1e-2), rel=1e-9)
+    assert np.array_equal(step.phi[:-1], phi[:-1])
 
 
 def test_zero_speed_changes_nothing():

@@ -59,7 +59,12 @@ from diathermy.physics.tissue_effects import (
     arrhenius_damage_increment,
     electrical_conductivity,
 )
-from diathermy.physics.topology import Topology, contact_height, evaluate_topology
+from diathermy.physics.topology import (
+    REMOVED_FRACTION,
+    Topology,
+    contact_height,
+    evaluate_topology,
+)
 from diathermy.report.budget import resolve_accuracy_budget
 from diathermy.scene import Scene
 
@@ -283,11 +288,29 @@ class Simulation:
         return sigma
 
     def _contact(self, pose: ElectrodePose) -> ContactWeights | None:
-        """The contact disk of an electrode, on the healthy surface below it; None when off the block."""
+        """The contact disk of an electrode, on the healthy surface below it.
+
+        None when the disk lies off the block, or when the cut under its centre reaches the
+        bottom (the return electrode): no tissue is left between the electrodes.
+        """
         x, y = pose.position_m
         z = self.top_z
         if "dissection" in self.effects and st_has_cut(self.state):
-            z = float(contact_height(self.disc.to_grid(self.state["level_set"]), self.grid, x, y))
+            g = self.grid
+            # a centre just off an edge still touches with part of its disk: use the nearest column
+            (x0, y0, z0), (lx, ly, _) = g.origin_m, g.size_m
+            xc, yc = min(max(x, x0), x0 + lx), min(max(y, y0), y0 + ly)
+            z = float(contact_height(self._contact_level_set(), g, xc, yc))
+            # A front in the lower half of a cell layer leaves that layer's tets removed (half or
+            # more cut): the disk goes down to the node layer under it, the top of the healthy
+            # tets. Left in between, it loaded tets of sigma ~ 0 and the set power went into the
+            # crater's vapor (R rose 100x and T passed 1100 K at dt 0.3 s).
+            dz = g.spacing_m[2]
+            k = np.floor((z - z0) / dz + 1e-9)
+            if z - (z0 + k * dz) < REMOVED_FRACTION * dz:
+                z = z0 + k * dz
+            if z <= z0 + 1e-9 * dz:
+                return None
         key = (x, y, z, pose.radius_m)
         if key not in self._contacts:
             try:
@@ -295,6 +318,20 @@ class Simulation:
             except SceneError:
                 return None
         return self._contacts[key]
+
+    def _contact_level_set(self) -> np.ndarray:
+        """phi (nz, ny, nx) in m as the electrode sees it: a loose fragment has fallen away.
+
+        The level set still counts a fragment cut loose from the bottom as tissue (phi > 0), but
+        its tets are removed; nodes with no healthy tet around them get phi < 0 here, so the
+        contact drops to the healthy surface below instead of riding the fragment.
+        """
+        phi = self.state["level_set"]
+        if self.topology is not None and self.topology.loose.any():
+            tets = self.disc.mesh.tets[~self.state["removed"]]
+            held = np.bincount(tets.ravel(), minlength=self.disc.n_nodes) > 0
+            phi = np.where(held, phi, np.minimum(phi, -np.abs(phi) - 1e-12))
+        return self.disc.to_grid(phi)
 
     def _step_electric(
         self, poses: list[ElectrodePose], dt: float, rep: StepReport, T_old: np.ndarray
@@ -310,7 +347,11 @@ class Simulation:
         if not contacts:
             st["potential"] = np.zeros(self.disc.n_nodes)
             st["joule_heat"] = np.zeros(self.disc.n_tets)
-            return EffectReport(False, "no active electrode in contact with the tissue")
+            return EffectReport(
+                False,
+                "no active electrode in contact with the tissue (off the block, or cut through "
+                "to the return electrode)",
+            )
         contact, drive = _combined(contacts)
         sigma = self._conductivity()
         self.calls["electric"] += 1
@@ -578,6 +619,8 @@ class Simulation:
                 out["potential_unit_V"], out["potential_unit_load"] = V1, load1
                 out["potential_unit_R"] = np.asarray(R)
                 out["potential_contact_key"] = np.asarray(key)
+                # the conductivity V1 was solved with: the cut may have changed it since
+                out["potential_sigma"] = np.asarray(self.potential.solver.sigma)
         return out
 
     def restore_solver_state(
@@ -598,7 +641,8 @@ class Simulation:
             x, y, z, r = (float(v) for v in solver["potential_contact_key"])
             contact = contact_weights(self.disc.mesh, (x, y, z), r)
             self._contacts = {(x, y, z, r): contact}
-            self.potential.solver.set_conductivity(self._conductivity())
+            sigma = solver.get("potential_sigma")
+            self.potential.solver.set_conductivity(self._conductivity() if sigma is None else sigma)
             self.potential.restore_unit_field(
                 contact,
                 (

@@ -27,7 +27,7 @@ from typing import Any, Literal
 import numpy as np
 import scipy.sparse as sp
 
-from diathermy.errors import SceneError
+from diathermy.errors import SceneError, SolverDivergedError
 from diathermy.fem.edges import EdgeStiffness, LaplacianPattern, laplacian_pattern
 from diathermy.fem.multigrid import SCALAR_AMG_OPTIONS, scaled_candidates, unit_diagonal
 from diathermy.fem.solvers import KrylovSolver, SolveStats
@@ -326,4 +326,9 @@ def drive_current(drive: ElectrodeDrive, area_m2: float, resistance_ohm: float) 
     """Injected current I in A: j * area (constant current density) or sqrt(P / R) (power)."""
     if drive.mode == "current_density":
         return drive.current_density_a_per_m2 * area_m2
+    if not resistance_ohm > 0:
+        raise SolverDivergedError(
+            f"potential: resistance between the electrodes is {resistance_ohm} ohm, so no current "
+            "delivers the set power (does the contact touch the return electrode?)"
+        )
     return float(np.sqrt(drive.power_w / resistance_ohm))

@@ -138,7 +138,8 @@ class _Stencil:
     """Flat indices of the active nodes and of their -/+ neighbours per axis (z, y, x).
 
     At a block face the missing neighbour is replaced by linear extrapolation (ghost = 2 phi_c -
-    phi_inner), i.e. both one-sided differences there are the inner one.
+    phi_inner), i.e. both one-sided differences there are the inner one, the ghost's capped at
+    ``GHOST_SLOPE_CAP``.
     """
 
     center: np.ndarray
@@ -146,6 +147,11 @@ class _Stencil:
     plus: tuple[np.ndarray, ...]
     at_lo: tuple[np.ndarray, ...]
     at_hi: tuple[np.ndarray, ...]
+
+
+GHOST_SLOPE_CAP = 1.0
+"""Largest slope of phi (m/m) a face's ghost node extrapolates: a signed distance's, so a front
+entering through a face moves at F, and a face node cannot run away from the interior."""
 
 
 def _stencil(shape: tuple[int, ...], active: np.ndarray) -> _Stencil:
@@ -172,8 +178,10 @@ def _godunov_gradient(flat: np.ndarray, st: _Stencil, h_zyx: Spacing) -> np.ndar
     g2 = np.zeros(pc.shape)
     for h, im, ip, lo, hi in zip(h_zyx, st.minus, st.plus, st.at_lo, st.at_hi, strict=True):
         pm, pp = flat[im], flat[ip]
-        d_minus = np.where(lo, pp - pc, pc - pm) / h
-        d_plus = np.where(hi, pc - pm, pp - pc) / h
+        # Ghost slopes are capped at GHOST_SLOPE_CAP: uncapped, a face node whose inner
+        # neighbour lags falls by a factor (1 + dt_sub F / h) per sub-step (-1e81 m in one 1 s step).
+        d_minus = np.where(lo, np.minimum(pp - pc, GHOST_SLOPE_CAP * h), pc - pm) / h
+        d_plus = np.where(hi, np.maximum(pc - pm, -GHOST_SLOPE_CAP * h), pp - pc) / h
         g2 += np.maximum(np.maximum(d_minus, -d_plus), 0.0) ** 2
     return np.sqrt(g2)
 
@@ -205,7 +213,8 @@ def advance(
     no new extrema appear, and F >= 0, g >= 0 give phi_new <= phi (enforced by a min against
     round-off all the same). At a block face the missing neighbour is a linearly extrapolated
     ghost, so a front can enter through a face (the top); there the bound holds with respect to the
-    ghost values. Nodes with F = 0 do not change, so only nodes with F > 0 are updated (their
+    ghost values, whose slope is capped at ``GHOST_SLOPE_CAP`` (the ghost term decreases as phi_c
+    does, so uncapped it would grow geometrically over the sub-steps). Nodes with F = 0 do not change, so only nodes with F > 0 are updated (their
     neighbours are read); a step with F = 0 everywhere returns an exact copy.
 
     Args:
