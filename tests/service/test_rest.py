@@ -45,11 +45,9 @@ def test_lifecycle(api: httpx.Client) -> None:
     assert r.status_code == 200 and r.json()["control_id"] == 1
     rep = api.post(f"/v1/sessions/{sid}/step", json={}).json()["reports"][0]
     assert rep["delivered_power_w"] == 0.0 and rep["energy"]["joule_in"] == heated  # no heating
-    assert rep["effects"]["electric"] == {
-        **rep["effects"]["electric"],
-        "ran": False,
-        "reason": "no active electrode in contact with the tissue",
-    }
+    electric = rep["effects"]["electric"]
+    assert electric["ran"] is False
+    assert electric["reason"].startswith("no active electrode in contact with the tissue")
 
     api.patch(f"/v1/sessions/{sid}/electrodes/active", json={"power_w": 20.0})
     rep = api.post(f"/v1/sessions/{sid}/step").json()["reports"][0]

@@ -55,9 +55,8 @@ def test_online_enrichment_reaches_the_fem_answer(tiny_model_file: Path) -> None
 
 
 def test_missing_or_foreign_model_is_a_clear_error(tmp_path: Path, tiny_model_file: Path) -> None:
-    sim = _hot_sim(None)
     with pytest.raises(SceneError, match="needs mechanics.model"):
-        sim.step()
+        _hot_sim(None)  # the backend is built with the simulation: a missing model fails at once
     scene = Scene(
         grid=(9, 9, 9),
         effects=["mechanics"],
