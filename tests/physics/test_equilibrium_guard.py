@@ -123,3 +123,29 @@ def test_jacobi_cg_on_the_assembled_stiffness_reaches_the_tolerance(problem) -> 
         strain_energy_density(geom.grads, mesh.tets, c.u, E, NU), W_ref
     )
     assert err < 1e-2
+
+
+def test_ritz_scale_recovers_the_amplitude_and_never_increases_the_energy_error(problem) -> None:  # noqa: ANN001
+    from diathermy.physics.equilibrium_guard import ritz_scale
+
+    mesh, geom, E, _, p, solver, u, free = problem
+    f = solver.load(p, P0).reshape(-1, 3)
+    K = solver.K
+
+    def Ku(v: np.ndarray) -> np.ndarray:
+        return (K @ v.ravel()).reshape(-1, 3)
+
+    assert ritz_scale(f, Ku(0.3 * u), 0.3 * u, free) == pytest.approx(1 / 0.3, rel=1e-8)
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        v = u * rng.uniform(0.2, 3.0) * (1 + 0.5 * rng.normal(size=u.shape))
+        v[~free] = 0.0
+        a = ritz_scale(f, Ku(v), v, free)
+
+        def energy_error(w: np.ndarray) -> float:
+            d = (u - w).ravel()
+            return float(d @ (K @ d))
+
+        assert energy_error(a * v) <= energy_error(v) * (1 + 1e-12)
+    zero = np.zeros_like(u)
+    assert ritz_scale(f, zero, zero, free) == 1.0

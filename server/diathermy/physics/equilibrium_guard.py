@@ -59,6 +59,19 @@ def relative_residual(f: np.ndarray, Ku: np.ndarray, free: np.ndarray) -> float:
     return r_norm / f_norm
 
 
+def ritz_scale(f: np.ndarray, Ku: np.ndarray, u: np.ndarray, free: np.ndarray) -> float:
+    """alpha = (u . f) / (u . K u) over the free DOFs: the best multiple of u in the energy norm.
+
+    The FEM solution u* minimises the energy; among alpha u, ||u* - alpha u||_K is smallest at
+    this alpha (a Ritz projection on span{u}), so alpha u is never farther from u* than u is.
+    Returns 1 when u carries no energy (nothing to scale).
+    """
+    uKu = float(np.sum((u * Ku)[free]))
+    if not uKu > 0.0:
+        return 1.0
+    return float(np.sum((u * f)[free])) / uKu
+
+
 def equilibrium_residual(
     geom: ElementGeometry,
     tets: np.ndarray,
