@@ -24,7 +24,7 @@ python -m diathermy datagen "$ROOT/scripts/default_model/datagen.yaml" --out "$W
 python -m diathermy.datagen.engine_samples --out "$WORK/engine.h5" --runs 3 --steps 80 --every 2 --seed 7
 python -m diathermy.datagen.engine_samples --merge "$WORK/alg1.h5" "$WORK/engine.h5" --out "$WORK/train.h5"
 python -m diathermy train "$WORK/train.h5" --out "$WORK/model.pt" --width 8 --depth 5 \
-    --epochs 30 --patience 8 --lr 2e-3 --batch-size 4 --val-fraction 0.2 --seed 0 --device cpu --quiet
+    --epochs 20 --patience 6 --lr 2e-3 --batch-size 4 --val-fraction 0.2 --seed 0 --device cpu --quiet
 python -m diathermy evaluate "$WORK/model.pt" "$WORK/train.h5" --subset validation \
     --json "$WORK/metrics_validation.json"
 python -m diathermy evaluate "$WORK/model.pt" "$WORK/train.h5" --json "$WORK/metrics_all.json"

@@ -12,6 +12,7 @@ from diathermy.physics.equilibrium_guard import (
     correct,
     equilibrium_residual,
     internal_force,
+    jacobi_cg,
 )
 from diathermy.physics.mechanics import MechanicsSolver
 from diathermy.physics.strain_energy import relative_strain_energy_error, strain_energy_density
@@ -51,11 +52,16 @@ def test_internal_force_is_the_assembled_stiffness_times_u(problem) -> None:  # 
 
 
 def test_residual_is_zero_at_equilibrium_and_scales_with_the_error(problem) -> None:  # noqa: ANN001
-    mesh, geom, E, healthy, p, _, u, free = problem
+    mesh, geom, E, healthy, p, solver, u, free = problem
     args = (p, P0, E, NU, healthy, free)
     assert equilibrium_residual(geom, mesh.tets, u, *args) < 1e-9
     # K (1.1 u) - f = 0.1 K u = 0.1 f: the relative residual is exactly 0.1
     assert equilibrium_residual(geom, mesh.tets, 1.1 * u, *args) == pytest.approx(0.1, rel=1e-6)
+    # the assembled operator (one mat-vec) and the matrix-free pass give the same residual
+    noisy = u * (1 + 0.2 * np.random.default_rng(2).normal(size=u.shape))
+    assert equilibrium_residual(geom, mesh.tets, noisy, *args, stiffness=solver.K) == pytest.approx(
+        equilibrium_residual(geom, mesh.tets, noisy, *args), rel=1e-9
+    )
     zero = np.zeros_like(u)
     assert (
         equilibrium_residual(geom, mesh.tets, zero, np.full_like(p, P0), P0, E, NU, healthy, free)
@@ -97,3 +103,49 @@ def test_no_iterations_when_the_start_already_passes(problem) -> None:  # noqa: 
 def test_unknown_preconditioner_is_refused() -> None:
     with pytest.raises(ValueError, match="amg"):
         GuardPreconditioners("ilu")  # type: ignore[arg-type]
+
+
+def test_jacobi_cg_on_the_assembled_stiffness_reaches_the_tolerance(problem) -> None:  # noqa: ANN001
+    from diathermy.fem.elastic import eigenstress_load
+
+    mesh, geom, E, healthy, p, solver, u, free = problem
+    K = solver.assembler.stiffness(E, NU)  # unconstrained: jacobi_cg masks the clamped DOFs
+    f = eigenstress_load(geom, mesh.tets, mesh.n_nodes, p - P0, healthy)
+    u0 = u * (1 + 0.3 * np.random.default_rng(4).normal(size=u.shape))
+    c = jacobi_cg(K, f, u0, free, tol=1e-3, maxiter=2000)
+    assert c.residual_before > 1e-2 and c.residual_after <= 1e-3 and c.iterations > 0
+    assert c.residual_after == pytest.approx(
+        equilibrium_residual(geom, mesh.tets, c.u, p, P0, E, NU, healthy, free), rel=1e-6
+    )
+    assert np.all(c.u[~free] == 0.0)
+    W_ref = strain_energy_density(geom.grads, mesh.tets, u, E, NU)
+    err = relative_strain_energy_error(
+        strain_energy_density(geom.grads, mesh.tets, c.u, E, NU), W_ref
+    )
+    assert err < 1e-2
+
+
+def test_ritz_scale_recovers_the_amplitude_and_never_increases_the_energy_error(problem) -> None:  # noqa: ANN001
+    from diathermy.physics.equilibrium_guard import ritz_scale
+
+    mesh, geom, E, _, p, solver, u, free = problem
+    f = solver.load(p, P0).reshape(-1, 3)
+    K = solver.K
+
+    def Ku(v: np.ndarray) -> np.ndarray:
+        return (K @ v.ravel()).reshape(-1, 3)
+
+    assert ritz_scale(f, Ku(0.3 * u), 0.3 * u, free) == pytest.approx(1 / 0.3, rel=1e-8)
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        v = u * rng.uniform(0.2, 3.0) * (1 + 0.5 * rng.normal(size=u.shape))
+        v[~free] = 0.0
+        a = ritz_scale(f, Ku(v), v, free)
+
+        def energy_error(w: np.ndarray) -> float:
+            d = (u - w).ravel()
+            return float(d @ (K @ d))
+
+        assert energy_error(a * v) <= energy_error(v) * (1 + 1e-12)
+    zero = np.zeros_like(u)
+    assert ritz_scale(f, zero, zero, free) == 1.0

@@ -4,8 +4,9 @@ A surrogate (the CNN) predicts u from (p, phi) without solving anything; the gua
 far that u is from equilibrium in the FEM's own terms, the relative residual
 ||f - K u|| / ||f|| over the free DOFs, and, when it is too large, continues the FEM solve from
 u with preconditioned CG until the residual is below the tolerance. The residual is evaluated
-matrix-free (one pass over the tets, the same P1 operator as ``MechanicsSolver.K``), so a step
-whose prediction passes costs no assembly; only a correction builds the operator.
+with one sparse mat-vec of the assembled stiffness of the current topology (assembled again only
+when E changes; ``internal_force`` is the matrix-free twin); only a correction builds the full
+``MechanicsSolver`` (constraints, loose fragments, preconditioner).
 """
 
 from __future__ import annotations
@@ -46,6 +47,31 @@ def internal_force(
     )
 
 
+def relative_residual(f: np.ndarray, Ku: np.ndarray, free: np.ndarray) -> float:
+    """||f - K u|| / ||f|| over the free DOFs: f, K u (n_nodes, 3) N, free bool (n_nodes, 3).
+
+    0 when f = 0 and K u = 0; +inf when only f is 0 (any force where none should be).
+    """
+    f_norm = float(np.linalg.norm(f[free]))
+    r_norm = float(np.linalg.norm((f - Ku)[free]))
+    if f_norm == 0.0:
+        return 0.0 if r_norm == 0.0 else float("inf")
+    return r_norm / f_norm
+
+
+def ritz_scale(f: np.ndarray, Ku: np.ndarray, u: np.ndarray, free: np.ndarray) -> float:
+    """alpha = (u . f) / (u . K u) over the free DOFs: the best multiple of u in the energy norm.
+
+    The FEM solution u* minimises the energy; among alpha u, ||u* - alpha u||_K is smallest at
+    this alpha (a Ritz projection on span{u}), so alpha u is never farther from u* than u is.
+    Returns 1 when u carries no energy (nothing to scale).
+    """
+    uKu = float(np.sum((u * Ku)[free]))
+    if not uKu > 0.0:
+        return 1.0
+    return float(np.sum((u * f)[free])) / uKu
+
+
 def equilibrium_residual(
     geom: ElementGeometry,
     tets: np.ndarray,
@@ -56,18 +82,20 @@ def equilibrium_residual(
     nu: float,
     healthy: np.ndarray,
     free: np.ndarray,
+    stiffness: Any = None,
 ) -> float:
-    """||f - K u|| / ||f|| over the free DOFs (bool (n_nodes, 3)); 0 when f = 0 and K u = 0.
+    """||f - K u|| / ||f|| over the free DOFs (bool (n_nodes, 3)) of u (n_nodes, 3) m.
 
-    f is the eigenstress load of the nodal pressure (n_nodes,) Pa carried by healthy tets.
+    f is the eigenstress load of the nodal pressure (n_nodes,) Pa carried by healthy tets. K u
+    is ``stiffness @ u`` when the assembled stiffness of this E is given (one sparse mat-vec),
+    else evaluated matrix-free (``internal_force``).
     """
     f = eigenstress_load(geom, tets, u.shape[0], np.asarray(pressure_pa) - p0_pa, healthy)
-    r = (f - internal_force(geom, tets, u, youngs_modulus_pa, nu))[free]
-    f_norm = float(np.linalg.norm(f[free]))
-    r_norm = float(np.linalg.norm(r))
-    if f_norm == 0.0:
-        return 0.0 if r_norm == 0.0 else float("inf")
-    return r_norm / f_norm
+    if stiffness is not None:
+        Ku = (stiffness @ u.ravel()).reshape(-1, 3)
+    else:
+        Ku = internal_force(geom, tets, u, youngs_modulus_pa, nu)
+    return relative_residual(f, Ku, free)
 
 
 @dataclass(frozen=True)
@@ -159,3 +187,55 @@ def correct(
         res = unscaled(f * s - A @ y)  # the true residual, not the recurrence's
     u = (y * s).reshape(-1, 3)
     return Correction(u, its, before, res, setup_s, time.perf_counter() - t0 - setup_s)
+
+
+def jacobi_cg(
+    stiffness: Any,
+    f: np.ndarray,
+    u0: np.ndarray,
+    free: np.ndarray,
+    *,
+    tol: float,
+    maxiter: int,
+) -> Correction:
+    """Jacobi-preconditioned CG on the free DOFs of K u = f, from u0 (n_nodes, 3) m.
+
+    ``stiffness`` is the assembled (unconstrained) K, f the load (n_nodes, 3) N, free bool
+    (n_nodes, 3); constrained DOFs stay 0. No setup at all: after a topology change it costs
+    only its mat-vecs. Stops once ||f - K u|| / ||f|| on the free DOFs is at most ``tol`` or after
+    ``maxiter`` iterations (the result says how far it got).
+    """
+    t0 = time.perf_counter()
+    m = free.ravel()
+    inv_diag = np.where(m, 1.0 / np.where(m, stiffness.diagonal(), 1.0), 0.0)
+    b = np.where(m, f.ravel(), 0.0)
+    b_norm = float(np.linalg.norm(b))
+    x = np.where(m, np.asarray(u0, float).ravel(), 0.0)
+
+    def apply(v: np.ndarray) -> np.ndarray:
+        return np.where(m, stiffness @ v, 0.0)
+
+    r = b - apply(x)
+
+    def rel(v: np.ndarray) -> float:
+        return float(np.linalg.norm(v)) / b_norm if b_norm > 0 else 0.0
+
+    before = res = rel(r)
+    its = 0
+    if res > tol:
+        z = inv_diag * r
+        d = z.copy()
+        rz = float(r @ z)
+        while its < maxiter and res > tol and rz > 0:
+            q = apply(d)
+            alpha = rz / float(d @ q)
+            x += alpha * d
+            r -= alpha * q
+            its += 1
+            res = rel(r)
+            z = inv_diag * r
+            rz_new = float(r @ z)
+            d = z + (rz_new / rz) * d
+            rz = rz_new
+        res = rel(b - apply(x))  # the true residual, not the recurrence's
+    return Correction(x.reshape(-1, 3), its, before, res, 0.0, time.perf_counter() - t0)
