@@ -151,7 +151,7 @@ class CNNBackend:
     # ------------------------------------------------------------------ the FEM operator
     def _stiffness(self, youngs_modulus_pa: np.ndarray) -> Any:
         """The assembled (unconstrained) stiffness of this E, kept until E changes."""
-        if self._K is None or not np.array_equal(self._K_E, youngs_modulus_pa):
+        if self._K is None or self._K_E is None or not np.array_equal(self._K_E, youngs_modulus_pa):
             if self._assembler is None:
                 self._assembler = mechanics_assembler(self.mesh)
             self._K = self._assembler.stiffness(youngs_modulus_pa, self.poisson_ratio)
