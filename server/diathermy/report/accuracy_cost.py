@@ -54,6 +54,16 @@ class Row:
     guard_tolerance: float | None = None
 
 
+PUBLISHED = (
+    ("fixed-electrode", "hybrid-CNN", "6.9 %"),
+    ("fixed-electrode", "hybrid-PGD, 15 modes", "13 %"),
+    ("moving-electrode", "hybrid-CNN", "9.6 %"),
+    ("moving-electrode", "hybrid-PGD, 15 modes", "69 %"),
+    ("(cross-validation)", "CNN", "10.3 % (mean)"),
+)
+"""The seed paper's headline errors (BENCHMARKS.md), printed beside ours and marked as published."""
+
+
 def _run(
     scene: Scene, variant: Variant, steps: int, out: Path, pool: ProcessPoolExecutor
 ) -> RunRecord:
@@ -251,6 +261,15 @@ def write_outputs(
             f"| {r.cut_volume_error:.1%} | {r.crater_depth_error:.1%} | {'yes' if r.error_grows else 'no'} "
             f"| {'*' if r.pareto else ''} |"
         )
+    lines += [
+        "",
+        "Published figures of the seed paper (Han, Rahul & De), beside ours for comparison — "
+        "**published, not measured here** (its grid 64x64x128, its own machines):",
+        "",
+        "| scene | variant | published max strain-energy error |",
+        "|---|---|---|",
+        *(f"| {scene} | {variant} (published) | {err} |" for scene, variant, err in PUBLISHED),
+    ]
     (out / "report.md").write_text("\n".join(lines) + "\n")
     _plots(rows, curves, out)
 
