@@ -34,6 +34,22 @@ def test_simulate_writes_run_file_and_vtu(tmp_path, capsys):
     assert "4 steps" in capsys.readouterr().out
 
 
+def test_dissection_run_writes_removed_mask_and_cut_surface(tmp_path):
+    from tests.engine.scenes import tiny_scene
+
+    scene = tmp_path / "cut.json"
+    scene.write_text(tiny_scene(steps=20).model_dump_json())
+    out = tmp_path / "run.h5"
+    assert (
+        main(["simulate", str(scene), "--out", str(out), "--vtu", str(tmp_path / "v"), "--quiet"])
+        == 0
+    )
+    run = read_run(out)
+    removed = run["cell_fields"]["removed"]
+    assert removed.shape[0] == 20 and removed[-1].sum() > 0 and not removed[0].any()
+    assert (tmp_path / "v" / "cut_00020.vtu").stat().st_size > 0
+
+
 def test_grid_override_and_every(tmp_path):
     out = tmp_path / "r.h5"
     assert (

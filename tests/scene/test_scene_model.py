@@ -126,3 +126,11 @@ def test_arbitrary_input_never_crashes(data):
         assert isinstance(scene_from_dict(data), Scene)
     except SceneError:
         pass
+
+
+def test_published_scene_schema_is_fresh():
+    """openapi/scene.schema.json is what `diathermy schema --out openapi/scene.schema.json` writes."""
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "openapi" / "scene.schema.json"
+    assert json.loads(path.read_text()) == scene_json_schema(), "regenerate with diathermy schema"

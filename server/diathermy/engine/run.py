@@ -68,6 +68,8 @@ def run_scene(
                     name = f"step_{sim.step_index:05d}.vtu"
                     sim.write_vtu(vtu_dir / name)
                     pvd.append((sim.time_s, name))
+                    if "dissection" in sim.effects:
+                        sim.write_cut_surface(vtu_dir / f"cut_{sim.step_index:05d}.vtu")
             bar.set_postfix(
                 P=f"{report.delivered_power_w:.1f}W",
                 Tmax=f"{report.max_temperature_k:.0f}K",

@@ -5,7 +5,8 @@ Layout (stable; later effects add names, never change the layout):
     /step                 (n,)                  step index
     /fields/<name>        (n, nz, ny, nx)       nodal scalars: potential, temperature, pressure, ...
                           (n, nz, ny, nx, 3)    nodal vectors: displacement (x, y, z components)
-    /cell_fields/<name>   (n, n_tets)           per-tetrahedron values: joule_heat, strain_energy
+    /cell_fields/<name>   (n, n_tets)           per-tetrahedron values: joule_heat, strain_energy,
+                                                removed (1 where the tissue is cut away)
     /reports              (n,)                  one JSON step report per record (UTF-8 strings)
 Root attributes: format, format_version, diathermy_version, scene (JSON), grid_shape (nz, ny, nx),
 spacing_m (dx, dy, dz), origin_m (x0, y0, z0), block_m (Lx, Ly, Lz).

@@ -26,7 +26,7 @@ from diathermy.engine.state import CELL_FIELDS, NODAL_FIELDS, SimulationState, i
 from diathermy.errors import SceneError
 from diathermy.fem.edges import edge_stiffness
 from diathermy.mesh import Grid
-from diathermy.physics.cut_surface import CutSurface, cut_surface
+from diathermy.physics.cut_surface import CutSurface, cut_surface, write_cut_surface
 from diathermy.physics.electric import (
     ContactWeights,
     DrivenPotential,
@@ -189,6 +189,8 @@ class Simulation:
             out["joule_heat"] = self.state["joule_heat"].copy()
         if "mechanics" in self.effects:
             out["strain_energy"] = self.state["strain_energy"].copy()
+        if "dissection" in self.effects:
+            out["removed"] = self.state["removed"].astype(np.uint8)
         return out
 
     def cut_surface(self) -> tuple[np.ndarray, np.ndarray]:
@@ -602,7 +604,7 @@ class Simulation:
         nodal = {
             n: v.reshape(self.disc.n_nodes, -1).squeeze() for n, v in self.nodal_fields().items()
         }
-        cells = {**self.cell_fields(), "removed": self.state["removed"].astype(np.float64)}
+        cells = {k: v.astype(np.float64) for k, v in self.cell_fields().items()}
         return write_vtu(path, self.disc.mesh.points, self.disc.mesh.tets, nodal, cells)
 
     def solver_state(self) -> dict[str, np.ndarray]:
@@ -651,6 +653,10 @@ class Simulation:
                     float(solver["potential_unit_R"]),
                 ),
             )
+
+    def write_cut_surface(self, path: str | Path) -> None:
+        """The cut (phi = 0) as a triangle mesh file; the suffix picks the format (.vtu, .ply, .stl)."""
+        write_cut_surface(path, cut_surface(self.disc.to_grid(self.state["level_set"]), self.grid))
 
     def save_checkpoint(self, path: str | Path) -> Path:
         from diathermy.engine.checkpoint import save_checkpoint
