@@ -268,10 +268,14 @@ def write_report(parts: list[dict[str, Any]], out_dir: Path, wall_s: float) -> N
     for ax, part in zip(axes[0], parts, strict=True):
         r = part["rows"]
         if not r:
+            ax.text(0.5, 0.5, f"{part['scene']}: no step ran the mechanics\n(p = p0 throughout)",
+                    ha="center", va="center", transform=ax.transAxes)  # fmt: skip
+            ax.set_axis_off()
             continue
         t = np.array([x["time_s"] for x in r])
         for key, label, color in (
-            ("cnn_error", "hybrid-CNN", "C0"),
+            ("raw_error", "raw CNN", "C1"),
+            ("cnn_error", "hybrid-CNN (Ritz-scaled)", "C0"),
             ("guard_error", "CNN + guard", "C2"),
         ):
             e = np.array([x[key] for x in r]) * 100
@@ -313,9 +317,11 @@ def main() -> int:
         data = json.loads(raw.read_text())
         write_report(data["parts"], args.out, data["wall_s"])
         return 0
+    per_scene = {k: int(v) for k, v in (x.split("=", 1) for x in args.scene_steps)}
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         futures = [
-            pool.submit(run_scene, s, args.steps, args.model, args.guard_tol) for s in args.scenes
+            pool.submit(run_scene, s, per_scene.get(s, args.steps), args.model, args.guard_tol)
+            for s in args.scenes
         ]
         parts = [f.result() for f in futures]
     wall = time.perf_counter() - t0
