@@ -26,6 +26,11 @@ from diathermy_client._models import (
     Fields,
     Grid,
     Health,
+    Job,
+    JobEvent,
+    JobLogLine,
+    ModelInfo,
+    ModelList,
     Scene,
     SessionCreate,
     SessionInfo,
@@ -299,6 +304,45 @@ class ClientCore:
             _session_info,
         )
 
+    # --- jobs
+    def submit_job(self, spec: dict[str, Any]) -> Call[Job]:
+        if not isinstance(spec, dict):
+            raise TypeError(f"spec must be a dict with a 'kind', got {type(spec).__name__}")
+        return Call(Request("POST", "/v1/jobs", json=spec), _job)
+
+    def list_jobs(self, *, state: str | None = None, kind: str | None = None) -> Call[list[Job]]:
+        params = {k: v for k, v in (("state", state), ("kind", kind)) if v is not None}
+        return Call(
+            Request("GET", "/v1/jobs", params or None),
+            lambda r: [Job.model_validate(j) for j in json_body(r)["jobs"]],
+        )
+
+    def get_job(self, job_id: str) -> Call[Job]:
+        return Call(Request("GET", f"/v1/jobs/{_seg(job_id)}"), _job)
+
+    def cancel_job(self, job_id: str) -> Call[Job]:
+        return Call(Request("POST", f"/v1/jobs/{_seg(job_id)}/cancel"), _job)
+
+    def job_log(self, job_id: str, *, after: int = 0) -> Call[list[JobLogLine]]:
+        return Call(
+            Request("GET", f"/v1/jobs/{_seg(job_id)}/log", {"after": str(int(after))}),
+            lambda r: [JobLogLine.model_validate(x) for x in json_body(r)["lines"]],
+        )
+
+    def job_events(self, job_id: str, *, timeout_s: float = 600.0) -> Request:
+        """The request of a job's event stream (read as server-sent events, not retried)."""
+        return Request("GET", f"/v1/jobs/{_seg(job_id)}/events", {"timeout_s": str(timeout_s)})
+
+    # --- model registry
+    def list_models(self) -> Call[ModelList]:
+        return Call(Request("GET", "/v1/models"), lambda r: ModelList.model_validate(json_body(r)))
+
+    def get_model(self, name: str, version: int) -> Call[ModelInfo]:
+        return Call(Request("GET", f"/v1/models/{_seg(name)}/{int(version)}"), _model)
+
+    def activate_model(self, name: str, version: int) -> Call[ModelInfo]:
+        return Call(Request("POST", f"/v1/models/{_seg(name)}/{int(version)}/activate"), _model)
+
     # --- reading answers
     def result(self, call: Call[T], resp: Response, *, retried: bool = False) -> T:
         """The typed result of an answer, or the SDK error it stands for."""
@@ -322,3 +366,44 @@ class ClientCore:
 
 def _session_info(resp: Response) -> SessionInfo:
     return SessionInfo.model_validate(json_body(resp))
+
+
+def _job(resp: Response) -> Job:
+    return Job.model_validate(json_body(resp))
+
+
+def _model(resp: Response) -> ModelInfo:
+    return ModelInfo.model_validate(json_body(resp))
+
+
+@dataclass
+class SSEParser:
+    """Server-sent events line by line: ``feed`` each line (no newline); a blank line ends an
+    event and returns it (``data`` parsed as JSON), other lines return None."""
+
+    event: str = "message"
+    data: list[str] = field(default_factory=list)
+    id: int | None = None
+
+    def feed(self, line: str) -> JobEvent | None:
+        if line == "":
+            if not self.data:
+                self.event, self.id = "message", None
+                return None
+            raw = "\n".join(self.data)
+            try:
+                data = json.loads(raw)
+            except ValueError:
+                raise ServerError(f"unreadable event data {raw[:200]!r}") from None
+            out = JobEvent(self.event, data if isinstance(data, dict) else {"value": data}, self.id)
+            self.event, self.data, self.id = "message", [], None
+            return out
+        name, _, value = line.partition(":")
+        value = value.removeprefix(" ")
+        if name == "event":
+            self.event = value
+        elif name == "data":
+            self.data.append(value)
+        elif name == "id" and value.isdigit():
+            self.id = int(value)
+        return None  # comments (":...") and unknown fields are ignored, as the spec says

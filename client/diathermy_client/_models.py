@@ -146,6 +146,99 @@ class Scene(_Result):
     electrodes: list[dict[str, Any]]
 
 
+JobKind = Literal["dataset", "training"]
+JobState = Literal["queued", "running", "succeeded", "failed", "cancelled"]
+FINAL_STATES: frozenset[str] = frozenset({"succeeded", "failed", "cancelled"})
+
+
+class JobProgress(_Result):
+    """How far a job is; fields that do not apply to its kind are None. ``eta_s`` in s."""
+
+    fraction: float = 0.0
+    samples: int | None = None
+    scenarios: int | None = None
+    epoch: int | None = None
+    epochs: int | None = None
+    train_loss: float | None = None
+    val_loss: float | None = None
+    val_rel_l2: float | None = None
+    eta_s: float | None = None
+
+
+class Job(_Result):
+    """A dataset or training job (``JobPublic``); ``done`` once it reached a final state."""
+
+    id: str
+    kind: JobKind
+    state: JobState
+    spec: dict[str, Any]
+    depends_on: str | None = None
+    progress: JobProgress
+    result: dict[str, Any] | None = None
+    error: str | None = None
+    attempts: int
+    max_attempts: int
+    worker: str | None = None
+    cancel_requested: bool = False
+    created_at: float
+    started_at: float | None = None
+    finished_at: float | None = None
+
+    @property
+    def done(self) -> bool:
+        return self.state in FINAL_STATES
+
+
+class JobLogLine(_Result):
+    """One line of a job's log; ``seq`` orders lines (pass the last one as ``after``)."""
+
+    seq: int
+    ts: float
+    line: str
+
+
+class ModelInfo(_Result):
+    """A registered surrogate (``ModelPublic``): grid (nz, ny, nx), metrics, whether active."""
+
+    name: str
+    version: int
+    ref: str
+    grid: tuple[int, int, int]
+    architecture: dict[str, Any]
+    dataset_sha256: str
+    dataset: dict[str, Any]
+    metrics: dict[str, Any]
+    training: dict[str, Any]
+    created_at: float
+    job_id: str | None = None
+    active: bool
+
+
+class ModelList(_Result):
+    """Every registered model and the active ``name:version`` per grid key ``NZxNYxNX``."""
+
+    models: list[ModelInfo]
+    active: dict[str, str] = {}
+
+
+@dataclass(frozen=True)
+class JobEvent:
+    """One server-sent event of a job: ``log`` (``line`` set), ``progress`` or ``end`` (``job``
+    set), or ``timeout`` (the server closed the stream; ``data`` has ``after_s``)."""
+
+    event: str
+    data: dict[str, Any]
+    id: int | None = None
+
+    @property
+    def job(self) -> Job | None:
+        return Job.model_validate(self.data) if self.event in ("progress", "end") else None
+
+    @property
+    def line(self) -> JobLogLine | None:
+        return JobLogLine.model_validate(self.data) if self.event == "log" else None
+
+
 @dataclass(frozen=True)
 class Fields:
     """Arrays of one step: nodal (nz, ny, nx[, 3]) or per-tet (n_tets,), with the grid."""

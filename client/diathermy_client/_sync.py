@@ -3,20 +3,27 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
 import httpx
 import numpy as np
 
-from diathermy_client._core import Call, ClientCore, Response, RetryPolicy
-from diathermy_client._errors import DiathermyError
+from diathermy_client._core import Call, ClientCore, Response, RetryPolicy, SSEParser, check
+from diathermy_client._errors import DiathermyError, Timeout
 from diathermy_client._models import (
     Dtype,
     ElectrodeAck,
     Fields,
     Health,
+    Job,
+    JobEvent,
+    JobKind,
+    JobLogLine,
+    JobState,
+    ModelInfo,
+    ModelList,
     Region,
     Scene,
     SessionInfo,
@@ -214,6 +221,92 @@ class Client:
     def restore_snapshot(self, session_id: str, snapshot: str | Snapshot) -> SessionInfo:
         """Back to a snapshot. Example: ``client.restore_snapshot(sid, snap)``."""
         return self._send(self._core.restore_snapshot(session_id, snapshot))
+
+    # --- jobs
+    def submit_job(self, spec: dict[str, Any]) -> Job:
+        """Queue a dataset or training job (a dict with ``kind``; see docs/worker.md).
+
+        Example: ``job = client.submit_job({"kind": "dataset", "config": {"grid": [5, 5, 9]}})``
+        """
+        return self._send(self._core.submit_job(spec))
+
+    def list_jobs(self, *, state: JobState | None = None, kind: JobKind | None = None) -> list[Job]:
+        """This token's jobs, newest first. Example: ``client.list_jobs(state="running")``."""
+        return self._send(self._core.list_jobs(state=state, kind=kind))
+
+    def get_job(self, job_id: str) -> Job:
+        """One job. Example: ``(client.get_job(job_id)).progress.fraction``."""
+        return self._send(self._core.get_job(job_id))
+
+    def cancel_job(self, job_id: str) -> Job:
+        """Cancel a queued job at once, a running one within seconds.
+
+        Example: ``client.cancel_job(job_id).cancel_requested``
+        """
+        return self._send(self._core.cancel_job(job_id))
+
+    def job_log(self, job_id: str, *, after: int = 0) -> list[JobLogLine]:
+        """The job's log lines with ``seq > after``. Example: ``[x.line for x in client.job_log(jid)]``."""
+        return self._send(self._core.job_log(job_id, after=after))
+
+    def job_events(self, job_id: str, *, timeout_s: float = 600.0) -> Iterator[JobEvent]:
+        """The job's server-sent events (``log``, ``progress``, then ``end``), until the server
+        ends the stream (at a final state, or ``timeout`` after ``timeout_s``).
+
+        Example::
+
+            for event in client.job_events(job_id):
+                if event.event == "progress":
+                    print(event.job.progress.fraction)
+        """
+        req = self._core.job_events(job_id, timeout_s=timeout_s)
+        timeout = httpx.Timeout(self._core.timeout_s, read=None)  # the server bounds the stream
+        parser = SSEParser()
+        try:
+            with self._http.stream(req.method, req.path, params=req.params, timeout=timeout) as r:
+                if r.status_code >= 400:
+                    r.read()
+                    check(to_response(r))
+                for line in r.iter_lines():
+                    event = parser.feed(line)
+                    if event is not None:
+                        yield event
+        except httpx.HTTPError as err:
+            raise transport_error(req, err) from err
+
+    def wait_job(self, job_id: str, *, timeout_s: float = 600.0, poll_s: float = 0.5) -> Job:
+        """Poll until the job is succeeded, failed or cancelled; raise ``Timeout`` after timeout_s.
+
+        Example: ``assert client.wait_job(job_id, timeout_s=60).state == "succeeded"``
+        """
+        deadline = time.monotonic() + timeout_s
+        while True:
+            job = self.get_job(job_id)
+            if job.done:
+                return job
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise Timeout(f"job {job_id} still {job.state} after {timeout_s} s")
+            time.sleep(min(poll_s, left))
+
+    # --- model registry
+    def list_models(self) -> ModelList:
+        """Registered models and the active one per grid.
+
+        Example: ``client.list_models().active.get("5x5x9")``
+        """
+        return self._send(self._core.list_models())
+
+    def get_model(self, name: str, version: int) -> ModelInfo:
+        """One registered model. Example: ``client.get_model("tiny", 1).metrics``."""
+        return self._send(self._core.get_model(name, version))
+
+    def activate_model(self, name: str, version: int) -> ModelInfo:
+        """Make a model the one new CNN sessions on its grid use (unless a scene names one).
+
+        Example: ``client.activate_model("tiny", 1).active``
+        """
+        return self._send(self._core.activate_model(name, version))
 
     def stream(
         self,

@@ -15,7 +15,7 @@ from pydantic import BaseModel
 from diathermy.engine.report import EffectReport as EngineEffectReport
 from diathermy.engine.report import StepReport as EngineStepReport
 from diathermy_client import _models as m
-from diathermy_client._core import ClientCore
+from diathermy_client._core import ClientCore, SSEParser
 from diathermy_client._stream_core import (
     Subscription,
     electrode_message,
@@ -40,6 +40,11 @@ RESULTS = {
     "StepResult": m.StepResult,
     "ElectrodeAck": m.ElectrodeAck,
     "Health": m.Health,
+    "JobPublic": m.Job,
+    "JobProgressPublic": m.JobProgress,
+    "JobLogLine": m.JobLogLine,
+    "ModelPublic": m.ModelInfo,
+    "ModelList": m.ModelList,
 }
 
 
@@ -130,14 +135,22 @@ def test_every_endpoint_the_sdk_calls_exists_with_that_method() -> None:
         core.take_snapshot("s1"),
         core.list_snapshots("s1"),
         core.restore_snapshot("s1", "snap"),
+        core.submit_job({"kind": "dataset", "config": {"grid": [5, 5, 9]}}),
+        core.list_jobs(state="queued", kind="dataset"),
+        core.get_job("j1"),
+        core.cancel_job("j1"),
+        core.job_log("j1", after=3),
+        core.list_models(),
+        core.get_model("tiny", 1),
+        core.activate_model("tiny", 1),
     ]
+    requests = [call.request for call in calls] + [core.job_events("j1", timeout_s=5)]
     routes = [
         (method.upper(), path_regex(p), op)
         for p, ops in OPENAPI["paths"].items()
         for method, op in ops.items()
     ]
-    for call in calls:
-        req = call.request
+    for req in requests:
         found = [op for method, rx, op in routes if method == req.method and rx.match(req.path)]
         assert found, f"{req.method} {req.path} is not in openapi.json"
         params: dict[str, Any] = {
@@ -149,6 +162,26 @@ def test_every_endpoint_the_sdk_calls_exists_with_that_method() -> None:
         )
         if req.json is not None:
             ref = found[0]["requestBody"]["content"]["application/json"]["schema"]
-            ref = ref.get("$ref") or next(a["$ref"] for a in ref.get("anyOf", []) if "$ref" in a)
+            if "oneOf" in ref:  # a discriminated union: the member the body's tag names
+                ref = ref["discriminator"]["mapping"][
+                    req.json[ref["discriminator"]["propertyName"]]
+                ]
+            else:
+                ref = ref.get("$ref") or next(
+                    a["$ref"] for a in ref.get("anyOf", []) if "$ref" in a
+                )
             props = SCHEMAS[ref.rsplit("/", 1)[-1]]["properties"]
             assert set(req.json) <= set(props), (req.path, req.json)
+
+
+def test_job_states_and_kinds_match_the_schema() -> None:
+    from typing import get_args
+
+    assert set(get_args(m.JobState)) == set(SCHEMAS["JobState"]["enum"])
+    assert set(get_args(m.JobKind)) == set(SCHEMAS["JobKind"]["enum"])
+    assert set(SCHEMAS["JobState"]["enum"]) - m.FINAL_STATES == {"queued", "running"}
+    lines = ["id: 3", "event: log", 'data: {"seq": 3, "ts": 1.0, "line": "hi"}', ""]
+    parser = SSEParser()
+    events = [e for e in map(parser.feed, [": comment", *lines]) if e is not None]
+    assert len(events) == 1 and events[0].id == 3 and events[0].line is not None
+    assert events[0].line.line == "hi" and events[0].job is None

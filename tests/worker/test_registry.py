@@ -63,3 +63,35 @@ def test_a_named_model_of_another_grid_is_refused(tmp_path: Path) -> None:
     _register(tmp_path, tmp_path, "cnn", (5, 5, 9))
     with pytest.raises(ModelNotFoundError, match="trained on grid 5x5x9"):
         resolve_model(tmp_path, (7, 7, 13), "cnn:1")
+
+
+def test_the_engine_resolves_registry_names_and_the_active_model(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from diathermy.engine.simulation import _cnn_model_path
+    from diathermy.errors import SceneError
+
+    data = tmp_path / "data"
+    monkeypatch.setenv("DIATHERMY_DATA_DIR", str(data))
+    shipped = tmp_path / "shipped.pt"
+
+    def fallback(grid: tuple[int, int, int]) -> Path:
+        return shipped
+
+    grid = (5, 5, 9)
+    assert _cnn_model_path(None, grid, fallback) == shipped  # empty registry: the shipped one
+    _register(data, tmp_path, "cnn", grid)
+    _register(data, tmp_path, "cnn", grid)
+    assert _cnn_model_path(None, grid, fallback) == shipped  # nothing active yet
+    activate_model(data, "cnn:1")
+    assert _cnn_model_path(None, grid, fallback) == data / "models/cnn/1/model.pt"
+    assert _cnn_model_path("cnn", grid, fallback) == data / "models/cnn/2/model.pt"
+    assert _cnn_model_path("cnn:1", grid, fallback) == data / "models/cnn/1/model.pt"
+    own = tmp_path / "own.pt"
+    own.write_bytes(b"w")
+    assert _cnn_model_path(str(own), grid, fallback) == own  # a file path wins
+    for bad in ["nope", "cnn:7", str(tmp_path / "missing.pt")]:
+        with pytest.raises(SceneError, match=r"mechanics\.model.*neither a file"):
+            _cnn_model_path(bad, grid, fallback)
+    with pytest.raises(SceneError, match=r"mechanics\.model"):
+        _cnn_model_path("cnn", (7, 7, 13), fallback)  # trained on another grid

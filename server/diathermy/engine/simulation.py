@@ -11,10 +11,11 @@ conductivity and contact (reused), no node above saturation (p = p0, no EOS), p 
 
 from __future__ import annotations
 
+import os
 import time
 from collections import Counter
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from pathlib import Path
 
 import numpy as np
 
@@ -67,9 +68,6 @@ from diathermy.physics.topology import (
 )
 from diathermy.report.budget import resolve_accuracy_budget
 from diathermy.scene import Scene
-
-if TYPE_CHECKING:
-    from pathlib import Path
 
 
 class Simulation:
@@ -706,10 +704,9 @@ def make_backend(sim: Simulation) -> MechanicsBackend:
         # torch loads only here: an FEM-only engine never imports it
         from diathermy.surrogates.backend import CNNBackend, default_model_path
 
-        model = cfg.model if cfg.model is not None else default_model_path(sim.scene.grid)
         return CNNBackend(
             sim.disc.mesh,
-            model,
+            _cnn_model_path(cfg.model, sim.scene.grid, default_model_path),
             poisson_ratio=sim.tissue.poisson_ratio,
             p0_pa=sim.tissue.p_atm_pa,
             ersatz_ratio=sim.tissue.ersatz_stiffness_ratio,
@@ -718,6 +715,34 @@ def make_backend(sim: Simulation) -> MechanicsBackend:
     if cfg.backend == "pgd":
         return _pgd_backend(sim)
     raise SceneError(f"mechanics.backend: unknown backend {cfg.backend!r}")
+
+
+def _cnn_model_path(
+    model: str | None,
+    grid: tuple[int, int, int],
+    shipped: Callable[[tuple[int, int, int]], Path],
+) -> Path:
+    """A checkpoint file for ``mechanics.model``: an existing file path, else a registry name
+    (``name`` or ``name:version``) in ``$DIATHERMY_DATA_DIR``; with none given, the grid's active
+    registry model, else the shipped one. Raises ``SceneError`` naming ``mechanics.model``."""
+    from diathermy.worker.registry import resolve_model
+
+    if model is not None and Path(model).is_file():
+        return Path(model)
+    data_dir = Path(os.environ.get("DIATHERMY_DATA_DIR", "diathermy-data"))
+    if model is None:
+        active = resolve_model(data_dir, grid)
+        return active if active is not None else shipped(grid)
+    try:
+        path = resolve_model(data_dir, grid, model)
+    except SceneError as err:
+        raise SceneError(
+            f"mechanics.model: {model!r} is neither a file nor a model in the registry at "
+            f"{data_dir} ({err})"
+        ) from None
+    if path is None or not Path(path).is_file():
+        raise SceneError(f"mechanics.model: registry model {model!r} has no checkpoint file")
+    return Path(path)
 
 
 def _pgd_backend(sim: Simulation) -> MechanicsBackend:
