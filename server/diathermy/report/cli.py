@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import shutil
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -50,8 +51,11 @@ def _cmd(args: argparse.Namespace) -> int:
             )
         variants = [v for v in variants if v.name in wanted]
     out = Path(args.out)
+    command = (
+        "diathermy report accuracy-cost " + " ".join(sys.argv[3:]) if len(sys.argv) > 3 else None
+    )
     rows = accuracy_cost_report(
-        scenes, variants, steps=args.steps, out=out, progress=not args.quiet
+        scenes, variants, steps=args.steps, out=out, progress=not args.quiet, command=command
     )
     print(f"{len(rows)} rows -> {out / 'report.md'}")
     if args.install:
