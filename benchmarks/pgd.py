@@ -32,9 +32,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "server"))
 
-from diathermy.engine.backends import FEMBackend, MechanicsOutput  # noqa: E402
 from diathermy.engine.electrodes import electrode_pose  # noqa: E402
 from diathermy.engine.simulation import Simulation  # noqa: E402
+from diathermy.physics.mechanics_backend import FEMBackend, MechanicsOutput  # noqa: E402
 from diathermy.physics.strain_energy import (  # noqa: E402
     relative_strain_energy_error,
     strain_energy_density,

@@ -19,7 +19,6 @@ from pathlib import Path
 
 import numpy as np
 
-from diathermy.engine.backends import FEMBackend, MechanicsBackend
 from diathermy.engine.discretization import Discretization, build_discretization
 from diathermy.engine.electrodes import ElectrodeOverride, ElectrodePose, electrode_pose
 from diathermy.engine.report import EffectReport, StepReport
@@ -46,6 +45,7 @@ from diathermy.physics.levelset import (
     tet_to_node,
     volume_incidence,
 )
+from diathermy.physics.mechanics_backend import FEMBackend, MechanicsBackend
 from diathermy.physics.properties import (
     effective_conductivity,
     nodes_to_tets,

@@ -20,7 +20,6 @@ from typing import Any
 import numpy as np
 import torch
 
-from diathermy.engine.backends import MechanicsOutput
 from diathermy.errors import CheckpointError, SceneError
 from diathermy.fem.elastic import ElasticAssembler, eigenstress_load
 from diathermy.fem.geometry import structured_geometry
@@ -34,6 +33,7 @@ from diathermy.physics.equilibrium_guard import (
     ritz_scale,
 )
 from diathermy.physics.mechanics import MechanicsSolver, clamped_bottom, mechanics_assembler
+from diathermy.physics.mechanics_backend import MechanicsOutput
 from diathermy.surrogates.checkpoint import load_checkpoint
 from diathermy.surrogates.inference import default_device
 

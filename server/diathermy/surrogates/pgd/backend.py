@@ -13,9 +13,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from diathermy.engine.backends import FEMBackend, MechanicsOutput
 from diathermy.fem.geometry import structured_geometry
 from diathermy.mesh import Grid, TetMesh
+from diathermy.physics.mechanics_backend import FEMBackend, MechanicsOutput
 from diathermy.surrogates.pgd.model import PGDModel
 from diathermy.surrogates.pgd.online import enrich, equilibrium_residual, evaluate, reduce_state
 

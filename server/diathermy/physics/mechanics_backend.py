@@ -1,4 +1,7 @@
-"""Mechanics backends behind one interface: full FEM here; the CNN and PGD surrogates plug in."""
+"""Mechanics backends behind one interface (FEM here; the CNN and PGD surrogates implement it too).
+
+It sits below the engine so that the surrogates can implement it without importing the engine.
+"""
 
 from __future__ import annotations
 
