@@ -50,14 +50,21 @@ class FEMBackend:
     name = "fem"
 
     def __init__(
-        self, mesh: TetMesh, *, poisson_ratio: float, p0_pa: float, rtol: float, ersatz_ratio: float
+        self,
+        mesh: TetMesh,
+        *,
+        poisson_ratio: float,
+        p0_pa: float,
+        rtol: float,
+        ersatz_ratio: float,
+        assembler: ElasticAssembler | None = None,
     ) -> None:
         self.mesh = mesh
         self.poisson_ratio = poisson_ratio
         self.p0_pa = p0_pa
         self.rtol = rtol
         self.ersatz_ratio = ersatz_ratio
-        self._assembler: ElasticAssembler | None = None
+        self._assembler = assembler
         self._solver: MechanicsSolver | None = None
         self._E: np.ndarray | None = None
         self.n_builds = 0
@@ -66,6 +73,13 @@ class FEMBackend:
     @property
     def solver(self) -> MechanicsSolver | None:
         return self._solver
+
+    @property
+    def assembler(self) -> ElasticAssembler:
+        """The mesh's elasticity assembler, built on first use and shared by every topology."""
+        if self._assembler is None:
+            self._assembler = mechanics_assembler(self.mesh)
+        return self._assembler
 
     def operator_for(
         self, youngs_modulus_pa: np.ndarray, healthy: np.ndarray
@@ -77,8 +91,6 @@ class FEMBackend:
             and np.array_equal(self._E, youngs_modulus_pa)
         ):
             return self._solver, False
-        if self._assembler is None:
-            self._assembler = mechanics_assembler(self.mesh)
         self._solver = MechanicsSolver(
             self.mesh,
             youngs_modulus_pa,
@@ -86,7 +98,7 @@ class FEMBackend:
             healthy=healthy,
             ersatz_ratio=self.ersatz_ratio,
             rtol=self.rtol,
-            assembler=self._assembler,
+            assembler=self.assembler,
         )
         self._E = youngs_modulus_pa.copy()
         self.n_builds += 1

@@ -32,8 +32,8 @@ from diathermy.physics.equilibrium_guard import (
     relative_residual,
     ritz_scale,
 )
-from diathermy.physics.mechanics import MechanicsSolver, clamped_bottom, mechanics_assembler
-from diathermy.physics.mechanics_backend import MechanicsOutput
+from diathermy.physics.mechanics import MechanicsSolver, clamped_bottom
+from diathermy.physics.mechanics_backend import FEMBackend, MechanicsOutput
 from diathermy.surrogates.checkpoint import load_checkpoint
 from diathermy.surrogates.inference import default_device
 
@@ -113,7 +113,15 @@ class CNNBackend:
         self.guard_tolerance = guard_tolerance
         self.guard_maxiter = int(guard_maxiter)
         self.ritz = bool(ritz)
-        self._assembler = assembler
+        # the FEM operator of the current topology (residual, Ritz scale, guard correction)
+        self._fem = FEMBackend(
+            mesh,
+            poisson_ratio=self.poisson_ratio,
+            p0_pa=self.p0_pa,
+            rtol=min(guard_tolerance or 1e-6, 1e-6),
+            ersatz_ratio=self.ersatz_ratio,
+            assembler=assembler,
+        )
         self._preconditioners = GuardPreconditioners(guard_preconditioner)
         self._geom = (
             assembler.geom
@@ -122,13 +130,15 @@ class CNNBackend:
         )
         self._free = ~clamped_bottom(mesh).mask(3 * mesh.n_nodes).reshape(-1, 3)
         self._input = torch.empty((1, 2, *grid.shape), dtype=torch.float32, device=self.device)
-        self._solver: MechanicsSolver | None = None
         self._K: Any = None
         self._K_E: np.ndarray | None = None
-        self._E: np.ndarray | None = None
         self.n_predictions = 0
         self.n_corrections = 0
-        self.n_builds = 0
+
+    @property
+    def n_builds(self) -> int:
+        """How many FEM operators (one per topology) the guard has built."""
+        return self._fem.n_builds
 
     # ------------------------------------------------------------------ the network
     def predict(self, pressure_pa: np.ndarray, level_set_m: np.ndarray) -> np.ndarray:
@@ -152,9 +162,7 @@ class CNNBackend:
     def _stiffness(self, youngs_modulus_pa: np.ndarray) -> Any:
         """The assembled (unconstrained) stiffness of this E, kept until E changes."""
         if self._K is None or self._K_E is None or not np.array_equal(self._K_E, youngs_modulus_pa):
-            if self._assembler is None:
-                self._assembler = mechanics_assembler(self.mesh)
-            self._K = self._assembler.stiffness(youngs_modulus_pa, self.poisson_ratio)
+            self._K = self._fem.assembler.stiffness(youngs_modulus_pa, self.poisson_ratio)
             self._K_E = youngs_modulus_pa.copy()
         return self._K
 
@@ -162,26 +170,7 @@ class CNNBackend:
         self, youngs_modulus_pa: np.ndarray, healthy: np.ndarray
     ) -> tuple[MechanicsSolver, bool]:
         """The FEM solver of this topology, rebuilt only when E changed; (solver, rebuilt)."""
-        if (
-            self._solver is not None
-            and self._E is not None
-            and np.array_equal(self._E, youngs_modulus_pa)
-        ):
-            return self._solver, False
-        if self._assembler is None:
-            self._assembler = mechanics_assembler(self.mesh)
-        self._solver = MechanicsSolver(
-            self.mesh,
-            youngs_modulus_pa,
-            self.poisson_ratio,
-            healthy=healthy,
-            ersatz_ratio=self.ersatz_ratio,
-            rtol=min(self.guard_tolerance or 1e-6, 1e-6),
-            assembler=self._assembler,
-        )
-        self._E = youngs_modulus_pa.copy()
-        self.n_builds += 1
-        return self._solver, True
+        return self._fem.operator_for(youngs_modulus_pa, healthy)
 
     # ------------------------------------------------------------------ MechanicsBackend
     def solve(
