@@ -206,7 +206,7 @@ def test_concurrent_step_gets_409_and_other_sessions_proceed(
         target=lambda: results.append(api.post(f"/v1/sessions/{slow}/step", json={"n": 15}))
     )
     t.start()
-    deadline = 50
+    deadline = 500  # up to 10 s for the step to take the lock on a loaded machine
     while not live.state.registry.sessions[slow].lock.locked() and deadline:
         threading.Event().wait(0.02)
         deadline -= 1
