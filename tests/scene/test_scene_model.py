@@ -22,9 +22,13 @@ from diathermy.scene import (
 
 
 def test_builtin_scenes_are_valid_and_round_trip(tmp_path):
-    assert {"default", "fixed-electrode", "moving-electrode", "coagulation"} <= set(
-        builtin_scene_names()
-    )
+    assert {
+        "default",
+        "fixed-electrode",
+        "moving-electrode",
+        "moving-electrode-slow",
+        "coagulation",
+    } <= set(builtin_scene_names())
     for name in builtin_scene_names():
         scene = builtin_scene(name)
         path = tmp_path / f"{name}.json"

@@ -31,6 +31,26 @@ def _moving() -> Scene:
     )
 
 
+MOVING_SLOW_SPEED_M_PER_S = 2.0e-3
+"""Speed of ``moving-electrode-slow``: the slowest of 2 / 4 / 12.35 mm/s measured on 33x33x65 that
+cuts within 12 s (first cut ~3.5 s; 4 mm/s boils to ~0.47 MPa but never cuts, 12.35 mm/s never
+boils: the 3.1 mm cells under-resolve the 1.17 mm contact)."""
+
+
+def _moving_slow() -> Scene:
+    path = ElectrodePath(
+        waypoints_m=MOVING_PATH_M, speed_m_per_s=MOVING_SLOW_SPEED_M_PER_S, kind="spline"
+    )
+    return Scene(
+        name="moving-electrode-slow",
+        description="The moving-electrode path at 2 mm/s, slow enough to vaporize and cut on the "
+        "default 33x33x65 grid (the paper's 12.35 mm/s never boils there): 50 W, 12 s, all "
+        "effects. The held-out moving scene of the surrogate benchmarks.",
+        electrodes=[Electrode(position_m=MOVING_PATH_M[0], path=path)],
+        steps=400,
+    )
+
+
 def _coagulation() -> Scene:
     return Scene(
         name="coagulation",
@@ -55,6 +75,7 @@ _BUILTIN: dict[str, Callable[[], Scene]] = {
     "default": _default,
     "fixed-electrode": _fixed,
     "moving-electrode": _moving,
+    "moving-electrode-slow": _moving_slow,
     "coagulation": _coagulation,
 }
 
