@@ -60,7 +60,9 @@ def overfit_model(sample: FemSample, path: Path, *, iterations: int = 100, seed:
     u = sample.u.reshape(*g.shape, 3)[None].astype(np.float32)
     model = DisplacementCNN(CNNConfig(width=8, depth=2), fit_scales(p, phi, u))
     x = model.normalizer.encode_inputs(torch.from_numpy(p), torch.from_numpy(phi))
-    target = model.normalizer.encode_displacement(torch.from_numpy(u).permute(0, 4, 1, 2, 3))
+    target = model.normalizer.encode_displacement(
+        torch.from_numpy(u).permute(0, 4, 1, 2, 3), torch.from_numpy(p)
+    )
     opt = torch.optim.LBFGS(
         model.parameters(), lr=1.0, max_iter=iterations, history_size=20,
         line_search_fn="strong_wolfe", tolerance_grad=0.0, tolerance_change=0.0,

@@ -17,6 +17,7 @@ from diathermy.surrogates import (
     predict,
     save_checkpoint,
 )
+from diathermy.surrogates.normalization import fit_scales
 
 
 def _fields(grid: tuple[int, int, int], seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -64,8 +65,49 @@ def test_normaliser_maps_physical_units() -> None:
     assert torch.allclose(x[:, 0], torch.full_like(p, 2.0))
     assert torch.allclose(x[:, 1], torch.full_like(p, 2.0))
     y = torch.ones(1, 3, 2, 2, 2)
-    assert torch.allclose(model.normalizer.decode_displacement(y), 3e-5 * y)
+    assert torch.allclose(model.normalizer.decode_displacement(y, p), 3e-5 * y)
     assert "normalizer.pressure_scale_pa" in model.state_dict()
+
+
+def test_per_sample_amplitude_makes_the_prediction_linear_in_the_overpressure() -> None:
+    """u is linear in p - p0 for a fixed topology: the amplitude-normalised model is exactly so."""
+    scales = FieldScales(p0_pa=1e5, pressure_scale_pa=1e6, level_set_scale_m=1e-2,
+                         displacement_scale_m=1e-4, per_sample_amplitude=True)  # fmt: skip
+    torch.manual_seed(0)
+    model = DisplacementCNN(CNNConfig(width=4, depth=2), scales).eval()
+    shape = (5, 6, 7)
+    bump = torch.rand(1, *shape)
+    phi = torch.rand(1, *shape) * 1e-2
+    with torch.no_grad():
+        u1 = model.predict_displacement(1e5 + 2e5 * bump, phi)
+        u7 = model.predict_displacement(1e5 + 7 * 2e5 * bump, phi)  # far outside any training
+        u0 = model.predict_displacement(torch.full((1, *shape), 1e5), phi)
+    assert u1.abs().max() > 0
+    assert torch.allclose(u7, 7 * u1, rtol=1e-5, atol=0)
+    assert torch.count_nonzero(u0) == 0  # no overpressure, no displacement (no NaN from 0/0)
+    x = model.normalizer.encode_inputs(1e5 + 2e5 * bump, phi)
+    assert float(x[:, 0].abs().max()) == pytest.approx(1.0)
+    # encode/decode of u are inverses under the same pressure
+    u = torch.randn(1, 3, *shape)
+    p = 1e5 + 3e5 * bump
+    back = model.normalizer.decode_displacement(model.normalizer.encode_displacement(u, p), p)
+    assert torch.allclose(back, u, rtol=1e-5)
+    # the flag is a constructor argument: it survives a rebuild from constructor_args
+    rebuilt = DisplacementCNN.from_constructor_args(model.constructor_args())
+    assert rebuilt.normalizer.per_sample_amplitude
+
+
+def test_fit_scales_per_sample_amplitude_measures_u_at_the_reference_amplitude() -> None:
+    shape = (3, 4, 5)
+    base = np.random.default_rng(0).random((*shape, 3))
+    amps = np.array([1e5, 4e5, 0.0])
+    p = 101325.0 + amps[:, None, None, None] * np.ones((3, *shape))
+    u = amps[:, None, None, None, None] * 1e-9 * base[None]  # linear in the amplitude
+    s = fit_scales(p, np.ones((3, *shape)), u, per_sample_amplitude=True)
+    assert s.per_sample_amplitude
+    assert s.pressure_scale_pa == pytest.approx(np.sqrt((1e10 + 16e10) / 2))
+    expected = np.sqrt(np.mean(np.square(s.pressure_scale_pa * 1e-9 * base)))
+    assert s.displacement_scale_m == pytest.approx(expected, rel=1e-9)
 
 
 def test_invalid_config_is_refused() -> None:

@@ -119,3 +119,18 @@ def test_torchrun_data_parallel_with_gloo(tiny_dataset: Path, tmp_path: Path) ->
     assert "trained 2 epochs" in proc.stdout
     ckpt = load_checkpoint(out)
     assert ckpt.training_state is not None and ckpt.training_state["epoch"] == 2
+
+
+def test_training_loss_weighs_the_strain() -> None:
+    """Weight 0 is the plain L2 loss; the strain term sees a rough error the L2 loss barely sees."""
+    from diathermy.surrogates.losses import l2_loss, training_loss
+
+    z = torch.linspace(0, 1, 16)
+    target = (z.view(1, 1, -1, 1, 1) * torch.ones(1, 3, 16, 16, 16)).contiguous()
+    smooth = target + 0.05  # an offset: no gradient error
+    rough = target + 0.05 * torch.where(torch.arange(16) % 2 == 0, 1.0, -1.0).view(1, 1, -1, 1, 1)
+    assert training_loss(rough, target, 0.0) == l2_loss(rough, target)
+    assert l2_loss(smooth, target) == pytest.approx(float(l2_loss(rough, target)))
+    assert training_loss(smooth, target, 1.0) == pytest.approx(float(l2_loss(smooth, target)))
+    assert training_loss(rough, target, 1.0) > 100 * training_loss(smooth, target, 1.0)
+    assert training_loss(target, target, 1.0) == 0

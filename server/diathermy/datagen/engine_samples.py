@@ -236,6 +236,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     a.add_argument("--every", type=int, default=EngineSamplesConfig.record_every)
     a.add_argument("--grid", type=int, nargs=3, default=EngineSamplesConfig.grid)
     a.add_argument("--seed", type=int, default=EngineSamplesConfig.seed)
+    a.add_argument(
+        "--power", type=float, nargs=2, default=EngineSamplesConfig.power_w, metavar=("MIN", "MAX"),
+        help="electrode power range, W",
+    )  # fmt: skip
+    a.add_argument(
+        "--speed", type=float, nargs=2, default=EngineSamplesConfig.speed_m_per_s,
+        metavar=("MIN", "MAX"), help="electrode speed range, m/s",
+    )  # fmt: skip
+    a.add_argument("--still-fraction", type=float, default=EngineSamplesConfig.still_fraction)
     args = a.parse_args(argv)
     from diathermy.runtime import configure_threads
 
@@ -245,7 +254,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     else:
         cfg = EngineSamplesConfig(
             grid=tuple(args.grid), n_runs=args.runs, n_steps=args.steps,
-            record_every=args.every, seed=args.seed,
+            record_every=args.every, seed=args.seed, power_w=tuple(args.power),
+            speed_m_per_s=tuple(args.speed), still_fraction=args.still_fraction,
         )  # fmt: skip
         n = write_engine_samples(cfg, args.out)
     print(f"{args.out}: {n} samples")

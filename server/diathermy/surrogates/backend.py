@@ -146,12 +146,12 @@ class CNNBackend:
         shape = self.mesh.grid.shape
         norm = self.model.normalizer
         with torch.inference_mode():
+            p = torch.from_numpy(np.asarray(pressure_pa, np.float32).reshape(1, *shape))
+            phi = torch.from_numpy(np.asarray(level_set_m, np.float32).reshape(1, *shape))
+            p, phi = p.to(self.device), phi.to(self.device)
             x = self._input
-            x[0, 0].copy_(torch.from_numpy(np.asarray(pressure_pa, np.float32).reshape(shape)))
-            x[0, 1].copy_(torch.from_numpy(np.asarray(level_set_m, np.float32).reshape(shape)))
-            x[0, 0].sub_(norm.p0_pa).div_(norm.pressure_scale_pa)
-            x[0, 1].div_(norm.level_set_scale_m)
-            y = self.model(x)[0].mul_(norm.displacement_scale_m)
+            x.copy_(norm.encode_inputs(p, phi))
+            y = norm.decode_displacement(self.model(x), p)[0]
             u = y.permute(1, 2, 3, 0).reshape(-1, 3).to("cpu", torch.float64).numpy()
         u = np.array(u)  # own the memory: torch may reuse it
         u[~self._free] = 0.0

@@ -42,6 +42,16 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _non_negative_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not 0 <= value < float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text!r}")
+    return value
+
+
 def _fraction(text: str) -> float:
     value = _positive_float(text)
     if value >= 1:
@@ -64,6 +74,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
         amp=args.amp,
         device=args.device,
         num_workers=args.workers,
+        per_sample_amplitude=not args.global_amplitude,
+        strain_weight=args.strain_weight,
     )
     result = train(args.data, args.out, config, resume=args.resume, progress=not args.quiet)
     if int(os.environ.get("RANK", "0")) != 0:  # under torchrun only rank 0 reports
@@ -152,6 +164,14 @@ def add_train_parser(subparsers: Any) -> None:
     s.add_argument("--amp", choices=["none", "bf16", "fp16"], default="none", help="autocast")
     s.add_argument("--device", default="auto", help="auto (GPU if any), cpu, cuda, cuda:1 ...")
     s.add_argument("--workers", type=_non_negative_int, default=0, help="DataLoader workers")
+    s.add_argument(
+        "--strain-weight", type=_non_negative_float, default=1.0,
+        help="weight of the strain (displacement-difference) loss beside the L2 loss (1.0)",
+    )  # fmt: skip
+    s.add_argument(
+        "--global-amplitude", action="store_true",
+        help="scale p - p0 by one dataset-wide constant instead of each sample's max |p - p0|",
+    )  # fmt: skip
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_train)
 

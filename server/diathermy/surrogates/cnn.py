@@ -67,7 +67,7 @@ class DisplacementCNN(nn.Module):
     ) -> torch.Tensor:
         """(N, D, H, W) absolute pressure in Pa and level set in m -> (N, 3, D, H, W) u in m."""
         x = self.normalizer.encode_inputs(pressure_pa, level_set_m)
-        return self.normalizer.decode_displacement(self(x))
+        return self.normalizer.decode_displacement(self(x), pressure_pa)
 
     def constructor_args(self) -> dict[str, Any]:
         """Plain-dict constructor arguments (config and scales) for checkpoints."""

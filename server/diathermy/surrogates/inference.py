@@ -38,6 +38,6 @@ def predict(
         x = model.normalizer.encode_inputs(pt, phit)
         if channels_last:
             x = x.contiguous(memory_format=torch.channels_last_3d)
-        u = model.normalizer.decode_displacement(model(x))
+        u = model.normalizer.decode_displacement(model(x), pt)
         out = u.permute(0, 2, 3, 4, 1).float().cpu().numpy()
     return np.ascontiguousarray(out[0] if single else out)

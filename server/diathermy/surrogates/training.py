@@ -34,7 +34,7 @@ from diathermy.surrogates.data import (
     read_samples,
     split_scenarios,
 )
-from diathermy.surrogates.losses import l2_loss, relative_l2_per_sample
+from diathermy.surrogates.losses import relative_l2_per_sample, training_loss
 from diathermy.surrogates.normalization import fit_scales
 
 AMP_DTYPES = {"none": None, "bf16": torch.bfloat16, "fp16": torch.float16}
@@ -56,6 +56,8 @@ class TrainConfig:
     device: str = "auto"  # "auto", "cpu", "cuda", "cuda:1", ...
     num_workers: int = 0
     scale_samples: int = 256  # training samples used to fit the normaliser
+    per_sample_amplitude: bool = True  # input/output scaled by each sample's max |p - p0|
+    strain_weight: float = 1.0  # weight of the displacement-difference (strain) loss
 
     def __post_init__(self) -> None:
         checks = {
@@ -65,6 +67,7 @@ class TrainConfig:
             "patience": self.patience >= 1,
             "num_workers": self.num_workers >= 0,
             "scale_samples": self.scale_samples >= 1,
+            "strain_weight": math.isfinite(self.strain_weight) and self.strain_weight >= 0,
         }
         for name, ok in checks.items():
             if not ok:
@@ -156,8 +159,9 @@ def _evaluate_loss(
     loader: DataLoader,
     device: torch.device,
     autocast: Callable[[], contextlib.AbstractContextManager[Any]],
+    strain_weight: float,
 ) -> tuple[float, float]:
-    """(mean normalised L2 loss, mean relative L2 error of u) over a loader."""
+    """(mean training loss, mean relative L2 error of u) over a loader."""
     model.eval()
     total, rel, count = 0.0, 0.0, 0
     with torch.inference_mode():
@@ -165,8 +169,8 @@ def _evaluate_loss(
             p, phi, u = p.to(device), phi.to(device), u.to(device)
             with autocast():
                 pred = model(net.normalizer.encode_inputs(p, phi)).float()
-            target = net.normalizer.encode_displacement(u)
-            total += float(l2_loss(pred, target)) * p.shape[0]
+            target = net.normalizer.encode_displacement(u, p)
+            total += float(training_loss(pred, target, strain_weight)) * p.shape[0]
             rel += float(relative_l2_per_sample(pred, target).sum())
             count += p.shape[0]
     return total / max(count, 1), rel / max(count, 1)
@@ -196,7 +200,8 @@ def _start_state(
     p0 = info.p0_pa
     torch.manual_seed(config.seed)
     model = DisplacementCNN(
-        CNNConfig(width=config.width, depth=config.depth), fit_scales(p, phi, u, p0_pa=p0)
+        CNNConfig(width=config.width, depth=config.depth),
+        fit_scales(p, phi, u, p0_pa=p0, per_sample_amplitude=config.per_sample_amplitude),
     )
     return model, None, split
 
@@ -317,7 +322,8 @@ def _train(
                 optimizer.zero_grad(set_to_none=True)
                 with autocast():
                     pred = model(net.normalizer.encode_inputs(p, phi))
-                loss = l2_loss(pred, net.normalizer.encode_displacement(u))
+                target = net.normalizer.encode_displacement(u, p)
+                loss = training_loss(pred, target, config.strain_weight)
                 scaler.scale(loss).backward()
                 scaler.step(optimizer)
                 scaler.update()
@@ -327,7 +333,9 @@ def _train(
                 bar.set_postfix(
                     epoch=epoch + 1, loss=f"{running / seen:.4g}", val=f"{best_val:.4g}"
                 )
-            val_loss, val_rel = _evaluate_loss(model, net, val_loader, device, autocast)
+            val_loss, val_rel = _evaluate_loss(
+                model, net, val_loader, device, autocast, config.strain_weight
+            )
             if val_loss < best_val:
                 best_val, best_rel, best_epoch, bad = val_loss, val_rel, epoch + 1, 0
                 best_weights = copy.deepcopy(net.state_dict())
