@@ -56,3 +56,23 @@ def test_recorded_samples_are_fem_solutions_and_merge_renumbers_scenarios(tmp_pa
     assert len(merged.complete_scenarios()) == 2 * len(info.complete_scenarios())
     with h5py.File(tmp_path / "m.h5") as f, h5py.File(tmp_path / "e.h5") as g:
         np.testing.assert_array_equal(f["displacement"][n:], g["displacement"][:])
+
+
+def test_scene_samples_record_the_given_scenes_as_their_own_scenarios(tmp_path: Path) -> None:
+    import pytest
+
+    from diathermy.datagen.engine_samples import write_scene_samples
+
+    scenes = [random_scene(TINY, 0), random_scene(TINY, 1)]
+    n = write_scene_samples(
+        scenes, tmp_path / "s.h5", n_steps=TINY.n_steps, record_every=2, log=False
+    )
+    m = write_engine_samples(TINY, tmp_path / "e.h5", log=False)
+    assert n == m > 0  # the same runs, recorded alike
+    with h5py.File(tmp_path / "s.h5") as f, h5py.File(tmp_path / "e.h5") as g:
+        np.testing.assert_array_equal(f["scenario"][:], g["scenario"][:])
+        np.testing.assert_array_equal(f["displacement"][:], g["displacement"][:])
+    with pytest.raises(ValueError, match="one grid"):
+        write_scene_samples(
+            [scenes[0], builtin_scene("fixed-electrode")], tmp_path / "x.h5", n_steps=1, log=False
+        )

@@ -13,6 +13,7 @@ Output: the ``diathermy-dataset`` v1 layout (``/pressure``, ``/level_set``, ``/d
 
     python -m diathermy.datagen.engine_samples --out engine.h5 --runs 3 --steps 70
     python -m diathermy.datagen.engine_samples --merge alg1.h5 engine.h5 --out train.h5
+    python -m diathermy.datagen.engine_samples --scene fixed-electrode --steps 400 --out test.h5
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import time
 from collections.abc import Iterator, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import h5py
 import numpy as np
@@ -84,22 +86,30 @@ def random_scene(config: EngineSamplesConfig, index: int):  # noqa: ANN201 (Scen
 def record_run(
     config: EngineSamplesConfig, index: int
 ) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
-    """(step, p (nz, ny, nx) Pa, phi (nz, ny, nx) m, u (nz, ny, nx, 3) m) of every recorded step.
+    """The recorded steps of random scene ``index`` (see :func:`record_scene`)."""
+    return record_scene(random_scene(config, index), config.n_steps, config.record_every)
+
+
+def record_scene(
+    scene: Any, n_steps: int, record_every: int
+) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
+    """(step, p (nz, ny, nx) Pa, phi (nz, ny, nx) m, u (nz, ny, nx, 3) m) of every
+    ``record_every``-th step of a FEM run of ``scene`` whose mechanics ran.
 
     phi is the level set the mechanics saw (before this step's dissection moved it).
     """
     from diathermy.engine.simulation import Simulation
 
-    sim = Simulation(random_scene(config, index))
+    sim = Simulation(scene.model_copy(update={"steps": n_steps}))
     grid = sim.disc.grid.shape
     seen = 0
-    for _ in range(config.n_steps):
+    for _ in range(n_steps):
         phi = sim.state["level_set"].copy()
         rep = sim.step()
         if not rep.ran("mechanics"):
             continue
         seen += 1
-        if (seen - 1) % config.record_every == 0:
+        if (seen - 1) % record_every == 0:
             yield (
                 rep.step,
                 sim.state["pressure"].reshape(grid).copy(),
@@ -180,6 +190,62 @@ def write_engine_samples(config: EngineSamplesConfig, out: str | Path, *, log: b
         return int(f.attrs["complete_rows"])
 
 
+def write_scene_samples(
+    names: Sequence[Any],
+    out: str | Path,
+    *,
+    n_steps: int,
+    record_every: int = 1,
+    grid: tuple[int, int, int] | None = None,
+    log: bool = True,
+) -> int:
+    """Record scenes (built-in names or Scene objects; one scenario each, in order) into ``out``.
+
+    Returns the row count.
+    The surrogates' held-out test set: ``diathermy evaluate MODEL out.h5`` then scores a model on
+    the benchmark scenes without re-running the FEM.
+    """
+    from diathermy.mesh import Grid
+    from diathermy.scene import builtin_scene
+
+    scenes = [builtin_scene(n) if isinstance(n, str) else n for n in names]
+    if grid is not None:
+        scenes = [s.model_copy(update={"grid": tuple(grid)}) for s in scenes]
+    if not scenes or any(
+        (s.grid, s.block_m) != (scenes[0].grid, scenes[0].block_m) for s in scenes
+    ):
+        raise ValueError("give one or more built-in scenes of one grid and block")
+    shape, block = tuple(scenes[0].grid), tuple(scenes[0].block_m)
+    attrs = {
+        "config": json.dumps(
+            {
+                "source": "engine_samples",
+                "scenes": [s.name for s in scenes],
+                "steps": n_steps,
+                "record_every": record_every,
+            },
+            sort_keys=True,
+        ),  # fmt: skip
+        "material": _material_json(),
+        "p0_pa": 101325.0,
+    }
+    t0 = time.perf_counter()
+    with h5py.File(Path(out), "w") as f:
+        _create(f, shape, Grid(shape, size_m=block).spacing_m, attrs)  # type: ignore[arg-type]
+        for run, scene in enumerate(scenes):
+            rows = [
+                (run, s, p, phi, u) for s, p, phi, u in record_scene(scene, n_steps, record_every)
+            ]
+            if rows:
+                _append(f, rows)
+            if log:
+                print(
+                    f"{scene.name}: {len(rows)} samples, {time.perf_counter() - t0:.0f} s",
+                    flush=True,
+                )
+        return int(f.attrs["complete_rows"])
+
+
 def merge_datasets(inputs: Sequence[str | Path], out: str | Path) -> int:
     """Concatenate dataset files of one grid into ``out`` (scenarios renumbered); returns rows."""
     out = Path(out)
@@ -231,6 +297,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     a = argparse.ArgumentParser(prog="python -m diathermy.datagen.engine_samples")
     a.add_argument("--out", required=True)
     a.add_argument("--merge", nargs="+", help="dataset files to concatenate instead")
+    a.add_argument("--scene", nargs="+", help="record these built-in scenes instead of random ones")
     a.add_argument("--runs", type=int, default=EngineSamplesConfig.n_runs)
     a.add_argument("--steps", type=int, default=EngineSamplesConfig.n_steps)
     a.add_argument("--every", type=int, default=EngineSamplesConfig.record_every)
@@ -251,6 +318,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     configure_threads()
     if args.merge:
         n = merge_datasets(args.merge, args.out)
+    elif args.scene:
+        n = write_scene_samples(
+            args.scene, args.out, n_steps=args.steps, record_every=args.every,
+            grid=tuple(args.grid) if args.grid != EngineSamplesConfig.grid else None,
+        )  # fmt: skip
     else:
         cfg = EngineSamplesConfig(
             grid=tuple(args.grid), n_runs=args.runs, n_steps=args.steps,
