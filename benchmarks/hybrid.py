@@ -1,7 +1,7 @@
 """Hybrid-CNN against FEM on the held-out built-in scenes: accuracy per step and cost per step.
 
-    python benchmarks/hybrid.py [--steps 100] [--scene-steps moving-electrode=250]
-                                [--scenes fixed-electrode moving-electrode]
+    python benchmarks/hybrid.py [--steps 400] [--scene-steps moving-electrode=250]
+                                [--scenes fixed-electrode moving-electrode-slow moving-electrode]
                                 [--model PATH] [--guard-tol 0.005] [--jobs 2]
 
 Per scene (each in its own process, ``--jobs`` at a time):
@@ -172,8 +172,11 @@ def write_report(parts: list[dict[str, Any]], out_dir: Path, wall_s: float) -> N
         f"Model `{Path(parts[0]['model']).name}`; guard tolerance {parts[0]['guard_tolerance']} "
         "(relative equilibrium residual). Steps of 0.03 s per scene: "
         + ", ".join(f"{p['scene']} {p['steps']}" for p in parts)
-        + " (fewer than the paper's 400, to fit the machine). Whole benchmark "
-        f"{wall_s / 60:.1f} min.",
+        + f" (the paper's: 400). Whole benchmark {wall_s / 60:.1f} min.",
+        "",
+        "Published (Han, Rahul & De; its grid 64x64x128, **not measured here**): max strain-energy "
+        "error of hybrid-CNN 6.9 % (fixed electrode) and 9.6 % (moving electrode), no growth "
+        "over time. Our target: <= 5 % without the guard, <= 1 % with it.",
         "",
         "## Surrogate error per step (CNN evaluated on the FEM run's own p, phi and topology)",
         "",
@@ -298,12 +301,15 @@ def write_report(parts: list[dict[str, Any]], out_dir: Path, wall_s: float) -> N
 
 def main() -> int:
     a = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    a.add_argument("--steps", type=int, default=100)
+    a.add_argument("--steps", type=int, default=400, help="steps per scene (the paper's 400)")
     a.add_argument(
-        "--scene-steps", nargs="*", default=["moving-electrode=250"], metavar="NAME=N",
-        help="per-scene step counts (the moving electrode boils only after ~4 s)",
+        "--scene-steps", nargs="*", default=[], metavar="NAME=N", help="per-scene step counts"
+    )
+    a.add_argument(
+        "--scenes", nargs="+",
+        default=["fixed-electrode", "moving-electrode-slow", "moving-electrode"],
+        help="built-in scenes; moving-electrode (12.35 mm/s) never boils on 33x33x65",
     )  # fmt: skip
-    a.add_argument("--scenes", nargs="+", default=["fixed-electrode", "moving-electrode"])
     a.add_argument("--model", help="checkpoint (default: the shipped model of the scene's grid)")
     a.add_argument("--guard-tol", type=float, default=5e-3)
     a.add_argument("--jobs", type=int, default=2)
