@@ -74,7 +74,7 @@ def add_report_parser(subparsers: Any) -> None:
     )
     s.add_argument(
         "--scenes",
-        default="fixed-electrode,moving-electrode",
+        default="fixed-electrode,moving-electrode-slow",
         help="comma-separated scene names or files",
     )
     s.add_argument("--grid", help="run the scenes on this grid (NZxNYxNX) instead of their own")
