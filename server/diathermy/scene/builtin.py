@@ -33,8 +33,9 @@ def _moving() -> Scene:
 
 MOVING_SLOW_SPEED_M_PER_S = 2.0e-3
 """Speed of ``moving-electrode-slow``: the slowest of 2 / 4 / 12.35 mm/s measured on 33x33x65 that
-cuts within 12 s (first cut ~3.5 s; 4 mm/s boils to ~0.47 MPa but never cuts, 12.35 mm/s never
-boils: the 3.1 mm cells under-resolve the 1.17 mm contact)."""
+cuts within 12 s (first cut at 2.8 s, 390 mm^3 and peak 5.8 MPa by 12 s; 4 mm/s boils to ~0.5 MPa
+but had not cut by 7.9 s; 12.35 mm/s never boils: the 3.1 mm cells under-resolve the 1.17 mm
+contact)."""
 
 
 def _moving_slow() -> Scene:
