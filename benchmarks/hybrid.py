@@ -37,8 +37,11 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def run_scene(name: str, steps: int, model: str | None, guard_tol: float) -> dict[str, Any]:
-    """The FEM run with per-step surrogate evaluations, then the coupled hybrid runs."""
+def run_scene(name: Any, steps: int, model: str | None, guard_tol: float) -> dict[str, Any]:
+    """The FEM run with per-step surrogate evaluations, then the coupled hybrid runs.
+
+    ``name``: a built-in scene's name or a Scene.
+    """
     import torch
 
     from diathermy.engine.simulation import Simulation
@@ -52,7 +55,9 @@ def run_scene(name: str, steps: int, model: str | None, guard_tol: float) -> dic
 
     configure_threads()
     torch.set_num_threads(1)
-    scene = builtin_scene(name).model_copy(update={"steps": steps})
+    scene = (builtin_scene(name) if isinstance(name, str) else name).model_copy(
+        update={"steps": steps}
+    )
     fem = Simulation(scene)
     t = fem.tissue
     model_path = model or str(default_model_path(scene.grid))
@@ -129,7 +134,7 @@ def run_scene(name: str, steps: int, model: str | None, guard_tol: float) -> dic
                 )
         coupled[label] = {"drift": drift, "steps": times}
     return {
-        "scene": name,
+        "scene": scene.name,
         "grid": list(scene.grid),
         "steps": steps,
         "model": model_path,

@@ -1,0 +1,47 @@
+"""A tiny run of benchmarks/hybrid.py: the harness runs end to end and writes its report."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import torch
+
+from diathermy.datagen.engine_samples import EngineSamplesConfig, random_scene
+from diathermy.mesh import Grid
+from diathermy.surrogates import CNNConfig, DisplacementCNN, FieldScales, save_checkpoint
+
+ROOT = Path(__file__).resolve().parents[2]
+TINY = EngineSamplesConfig(
+    grid=(7, 7, 13), block_m=(0.02, 0.01, 0.01), n_steps=9, power_w=(30.0, 40.0),
+    margin_m=0.004, seed=3,
+)  # fmt: skip
+
+
+def _load_benchmark():  # noqa: ANN202 (a module)
+    spec = importlib.util.spec_from_file_location("hybrid_benchmark", ROOT / "benchmarks/hybrid.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_hybrid_benchmark_runs_a_tiny_scene_and_writes_its_report(tmp_path: Path) -> None:
+    bench = _load_benchmark()
+    torch.manual_seed(0)
+    model = DisplacementCNN(
+        CNNConfig(width=2, depth=1), FieldScales(pressure_scale_pa=1e5, per_sample_amplitude=True)
+    )
+    path = tmp_path / "tiny.pt"
+    spacing = Grid(TINY.grid, size_m=TINY.block_m).spacing_m
+    save_checkpoint(path, model, grid_shape=TINY.grid, spacing_m=spacing)
+    scene = random_scene(TINY, 0)
+    part = bench.run_scene(scene, TINY.n_steps, str(path), 1e-3)
+    assert part["rows"], "the tiny scene must reach the mechanics"
+    for row in part["rows"]:
+        assert row["guard_error"] <= row["raw_error"] + 1e-12  # the guard only ever helps
+        assert row["guard_residual_after"] <= 1e-3
+    bench.write_report([part], tmp_path, wall_s=1.0)
+    report = (tmp_path / "hybrid.md").read_text()
+    assert scene.name in report and "| CNN+guard |" in report
+    assert (tmp_path / "hybrid.png").stat().st_size > 0
