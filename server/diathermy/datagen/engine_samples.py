@@ -231,7 +231,7 @@ def write_scene_samples(
     }
     t0 = time.perf_counter()
     with h5py.File(Path(out), "w") as f:
-        _create(f, shape, Grid(shape, size_m=block).spacing_m, attrs)  # type: ignore[arg-type]
+        _create(f, shape, Grid(shape, size_m=block).spacing_m, attrs)
         for run, scene in enumerate(scenes):
             rows = [
                 (run, s, p, phi, u) for s, p, phi, u in record_scene(scene, n_steps, record_every)
