@@ -47,7 +47,7 @@ def test_online_enrichment_reaches_the_fem_answer(tiny_model_file: Path) -> None
     sim = _hot_sim(tiny_model_file, guard_tolerance=1e-3)
     rep = sim.step()
     m = rep.effects["mechanics"]
-    assert m.extra["residual_checked"] and m.extra["enriched"]
+    assert m.extra["residual_checked"] and m.extra["enriched"] and m.extra["indicator"] > 1e-3
     assert m.extra["online_modes"] == 1 and m.extra["enrich_s"] > 0
     assert rep.effects["mechanics"].extra["residual"] < 1e-3
     backend = sim.mechanics

@@ -4,7 +4,7 @@ u(x; s, p, g) ~= sum_i M_i(x) N_i(s) R_i(p) S_i(g): s the electrode position (x,
 surface, p = (Q, r) the overpressure's strength and radius, g the topology's kernel-PCA
 coordinates. ``parameters`` maps a state to (s, Q, r, g), ``kpca`` the level set to g,
 ``offline`` builds the modes by greedy rank-one enrichment from FEM snapshots, ``model`` stores
-and evaluates them, ``online`` adds modes where the FEM residual says the state left the
+and evaluates them, ``online`` adds modes where an error indicator says the state left the
 training manifold, ``backend`` plugs the model into the engine. No torch here. Names load
 lazily, so the CLI parser does not import scikit-learn.
 """
