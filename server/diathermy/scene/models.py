@@ -122,7 +122,9 @@ class MechanicsConfig(_Model):
     rtol: Annotated[float, Field(gt=0, lt=1)] = 1e-6
     model: str | None = Field(None, description="surrogate model path or registry name")
     guard_tolerance: Annotated[float, Field(gt=0)] | None = Field(
-        None, description="relative equilibrium residual above which the CNN is corrected by CG"
+        None,
+        description="cnn: relative equilibrium residual above which the prediction is corrected "
+        "by CG; pgd: estimated strain-energy error above which a mode is enriched online",
     )
 
 
