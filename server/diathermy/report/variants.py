@@ -68,7 +68,8 @@ def default_variants(models: dict[str, str] | None = None) -> list[Variant]:
     """FEM at four tolerances, monolithic coupling and a coarser grid, plus the surrogates given.
 
     ``models`` maps variant names to model files, e.g. {"cnn-w16": "model.pt", "pgd-15": "pgd.npz"};
-    a name starting with "cnn" runs the CNN backend (also with the guard), "pgd" the PGD one.
+    a name starting with "cnn" runs the CNN backend (also with the guard), "pgd" the PGD one
+    (also with online enrichment at an estimated strain-energy error of 10 %).
     """
     out = [
         Variant("fem-rtol1e-2", rtol=1e-2),
@@ -89,4 +90,7 @@ def default_variants(models: dict[str, str] | None = None) -> list[Variant]:
             )
         elif name.startswith("pgd"):
             out.append(Variant(name, backend="pgd", model=path))
+            out.append(  # online enrichment when the strain-energy indicator exceeds 10 %
+                Variant(f"{name}+enrich1e-1", backend="pgd", model=path, guard_tolerance=1e-1)
+            )
     return out

@@ -1,0 +1,14 @@
+"""The report's variant list: names and what each surrogate adds."""
+
+from __future__ import annotations
+
+from diathermy.report.variants import default_variants
+
+
+def test_surrogates_add_their_guarded_and_enriched_variants() -> None:
+    names = {v.name: v for v in default_variants({"cnn-w8": "m.pt", "pgd-30": "p.npz"})}
+    assert {"cnn-w8", "cnn-w8+guard1e-2", "cnn-w8+guard1e-4"} <= set(names)
+    assert names["pgd-30"].guard_tolerance is None
+    assert names["pgd-30+enrich1e-1"].backend == "pgd"
+    assert names["pgd-30+enrich1e-1"].guard_tolerance == 0.1
+    assert all(v.backend == "fem" for v in default_variants() if v.name.startswith("fem"))
