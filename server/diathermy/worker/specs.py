@@ -90,6 +90,8 @@ class TrainOptions(_Spec):
     device: Annotated[str, Field(max_length=32, pattern=r"^(auto|cpu|cuda(:\d+)?)$")] = "auto"
     num_workers: Annotated[int, Field(ge=0, le=64)] = 0
     scale_samples: Annotated[int, Field(ge=1)] = 256
+    per_sample_amplitude: bool = True
+    strain_weight: Annotated[float, Field(ge=0, le=1e3, allow_inf_nan=False)] = 1.0
 
 
 class TrainingJobSpec(_Spec):
