@@ -74,6 +74,20 @@ def test_grid_override_and_every(tmp_path):
     assert list(run["step"]) == [2, 4] and "thermal_damage" in run["fields"]
 
 
+def test_guard_option_sets_the_scene_and_is_validated(tmp_path, capsys):
+    out = tmp_path / "g.h5"
+    args = ["simulate", "coagulation", "--grid", "5x5x9", "--steps", "1", "--quiet"]
+    assert main([*args, "--guard", "5e-3", "--out", str(out)]) == 0
+    scene = json.loads(read_run(out)["attrs"]["scene"])
+    assert scene["mechanics"]["guard_tolerance"] == 5e-3
+    proc = subprocess.run(
+        [sys.executable, "-m", "diathermy", *args, "--guard", "-1", "--out", str(out)],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    assert proc.returncode == 2 and "guard_tolerance" in proc.stderr, proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
+
+
 def test_user_errors_are_one_line(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("grid: [2, 2, 2]\n")

@@ -65,6 +65,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         data["mechanics"]["backend"] = args.mechanics
     if args.model is not None:
         data["mechanics"]["model"] = args.model
+    if args.guard is not None:
+        data["mechanics"]["guard_tolerance"] = args.guard
     scene = scene_from_dict(data)
     summary = run_scene(
         scene,
@@ -121,6 +123,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--every", type=int, default=1, help="write every k-th step (default 1)")
     s.add_argument("--mechanics", choices=["fem", "cnn", "pgd"], help="mechanics backend")
     s.add_argument("--model", help="surrogate model file for --mechanics cnn|pgd")
+    s.add_argument(
+        "--guard", type=float, metavar="TOL",
+        help="mechanics.guard_tolerance: cnn corrects predictions whose relative residual exceeds "
+        "it (5e-3 recommended: benchmarks/results/hybrid.md); pgd enriches a mode when its "
+        "estimated strain-energy error does",
+    )  # fmt: skip
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_simulate)
 
