@@ -106,6 +106,10 @@ class FieldNormalizer(nn.Module):
         values = {n: float(getattr(self, n)) for n in _BUFFERS}
         return FieldScales(**values, per_sample_amplitude=self.per_sample_amplitude)
 
+    def max_overpressure(self, pressure_pa: torch.Tensor) -> torch.Tensor:
+        """(N, D, H, W) pressure Pa -> (N,) each sample's max |p - p0|, Pa."""
+        return (pressure_pa - self.p0_pa).abs().flatten(1).amax(dim=1)
+
     def amplitude(self, pressure_pa: torch.Tensor) -> torch.Tensor:
         """(N, D, H, W) pressure Pa -> (N, 1, 1, 1) divisor of p - p0, Pa.
 
@@ -115,7 +119,7 @@ class FieldNormalizer(nn.Module):
         n = pressure_pa.shape[0]
         if not self.per_sample_amplitude:
             return self.pressure_scale_pa.expand(n, 1, 1, 1)
-        amp = (pressure_pa - self.p0_pa).abs().flatten(1).amax(dim=1).view(n, 1, 1, 1)
+        amp = self.max_overpressure(pressure_pa).view(n, 1, 1, 1)
         return torch.where(amp > 0, amp, self.pressure_scale_pa)
 
     def output_gain(self, pressure_pa: torch.Tensor) -> torch.Tensor:
@@ -123,7 +127,7 @@ class FieldNormalizer(nn.Module):
         gain = self.displacement_scale_m.expand(pressure_pa.shape[0], 1, 1, 1, 1)
         if not self.per_sample_amplitude:
             return gain
-        amp = (pressure_pa - self.p0_pa).abs().flatten(1).amax(dim=1)
+        amp = self.max_overpressure(pressure_pa)
         return gain * (amp / self.pressure_scale_pa).view(-1, 1, 1, 1, 1)
 
     def encode_inputs(self, pressure_pa: torch.Tensor, level_set_m: torch.Tensor) -> torch.Tensor:
