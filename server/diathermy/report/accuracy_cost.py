@@ -218,7 +218,8 @@ def accuracy_cost_report(
             finest = _run(scene, reference_for(Variant("f", grid=finest_grid)), steps, out, pool)
             for variant in variants:
                 bar.set_postfix(scene=scene.name, variant=variant.name)
-                ref = _run(scene, reference_for(variant), steps, out, pool)
+                same_grid = tuple(variant.grid or scene.grid) == tuple(finest_grid)
+                ref = finest if same_grid else _run(scene, reference_for(variant), steps, out, pool)
                 rec = _run(scene, variant, steps, out, pool)
                 row, se = _row(scene, rec, ref, out, finest)
                 rows.append(row)
