@@ -129,7 +129,6 @@ class CNNBackend:
             else structured_geometry(mesh.points, mesh.tets, mesh.shape_id)
         )
         self._free = ~clamped_bottom(mesh).mask(3 * mesh.n_nodes).reshape(-1, 3)
-        self._input = torch.empty((1, 2, *grid.shape), dtype=torch.float32, device=self.device)
         self._K: Any = None
         self._K_E: np.ndarray | None = None
         self.n_predictions = 0
@@ -149,9 +148,7 @@ class CNNBackend:
             p = torch.from_numpy(np.asarray(pressure_pa, np.float32).reshape(1, *shape))
             phi = torch.from_numpy(np.asarray(level_set_m, np.float32).reshape(1, *shape))
             p, phi = p.to(self.device), phi.to(self.device)
-            x = self._input
-            x.copy_(norm.encode_inputs(p, phi))
-            y = norm.decode_displacement(self.model(x), p)[0]
+            y = norm.decode_displacement(self.model(norm.encode_inputs(p, phi)), p)[0]
             u = y.permute(1, 2, 3, 0).reshape(-1, 3).to("cpu", torch.float64).numpy()
         u = np.array(u)  # own the memory: torch may reuse it
         u[~self._free] = 0.0
