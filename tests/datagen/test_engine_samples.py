@@ -76,3 +76,22 @@ def test_scene_samples_record_the_given_scenes_as_their_own_scenarios(tmp_path: 
         write_scene_samples(
             [scenes[0], builtin_scene("fixed-electrode")], tmp_path / "x.h5", n_steps=1, log=False
         )
+
+
+def test_cli_bad_input_is_one_line(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    for args in (
+        ["--scene", "no-such-scene"],
+        ["--scene", "default", "--grid", "1", "1", "1"],
+        ["--merge", str(tmp_path / "missing.h5")],
+    ):
+        proc = subprocess.run(
+            [sys.executable, "-m", "diathermy.datagen.engine_samples", *args, "--steps", "2",
+             "--out", str(tmp_path / "o.h5")],
+            capture_output=True, text=True,
+        )  # fmt: skip
+        assert proc.returncode == 2, proc.stderr
+        lines = proc.stderr.strip().splitlines()
+        assert len(lines) == 1 and "error:" in lines[0] and "Traceback" not in proc.stderr

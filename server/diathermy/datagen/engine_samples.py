@@ -30,7 +30,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from diathermy.errors import CheckpointError
+from diathermy.errors import CheckpointError, DiathermyError
 from diathermy.version import __version__
 
 FIELDS = ("pressure", "level_set", "displacement")
@@ -84,26 +84,30 @@ def random_scene(config: EngineSamplesConfig, index: int):  # noqa: ANN201 (Scen
 
 
 def record_run(
-    config: EngineSamplesConfig, index: int
+    config: EngineSamplesConfig, index: int, *, progress: bool = False
 ) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
     """The recorded steps of random scene ``index`` (see :func:`record_scene`)."""
-    return record_scene(random_scene(config, index), config.n_steps, config.record_every)
+    scene = random_scene(config, index)
+    return record_scene(scene, config.n_steps, config.record_every, progress=progress)
 
 
 def record_scene(
-    scene: Any, n_steps: int, record_every: int
+    scene: Any, n_steps: int, record_every: int, *, progress: bool = False
 ) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
     """(step, p (nz, ny, nx) Pa, phi (nz, ny, nx) m, u (nz, ny, nx, 3) m) of every
     ``record_every``-th step of a FEM run of ``scene`` whose mechanics ran.
 
-    phi is the level set the mechanics saw (before this step's dissection moved it).
+    phi is the level set the mechanics saw (before this step's dissection moved it);
+    ``progress`` shows a bar over the steps.
     """
+    from tqdm import tqdm
+
     from diathermy.engine.simulation import Simulation
 
     sim = Simulation(scene.model_copy(update={"steps": n_steps}))
     grid = sim.disc.grid.shape
     seen = 0
-    for _ in range(n_steps):
+    for _ in tqdm(range(n_steps), desc=scene.name, unit="step", disable=not progress):
         phi = sim.state["level_set"].copy()
         rep = sim.step()
         if not rep.ran("mechanics"):
@@ -180,7 +184,7 @@ def write_engine_samples(config: EngineSamplesConfig, out: str | Path, *, log: b
     with h5py.File(out, "w") as f:
         _create(f, config.grid, spacing, attrs)
         for run in range(config.n_runs):
-            rows = [(run, s, p, phi, u) for s, p, phi, u in record_run(config, run)]
+            rows = [(run, s, p, phi, u) for s, p, phi, u in record_run(config, run, progress=log)]
             if rows:
                 _append(f, rows)
             if log:
@@ -206,11 +210,11 @@ def write_scene_samples(
     the benchmark scenes without re-running the FEM.
     """
     from diathermy.mesh import Grid
-    from diathermy.scene import builtin_scene
+    from diathermy.scene import builtin_scene, scene_from_dict
 
     scenes = [builtin_scene(n) if isinstance(n, str) else n for n in names]
-    if grid is not None:
-        scenes = [s.model_copy(update={"grid": tuple(grid)}) for s in scenes]
+    if grid is not None:  # validated like a scene file's grid
+        scenes = [scene_from_dict({**s.model_dump(), "grid": list(grid)}) for s in scenes]
     if not scenes or any(
         (s.grid, s.block_m) != (scenes[0].grid, scenes[0].block_m) for s in scenes
     ):
@@ -225,7 +229,7 @@ def write_scene_samples(
                 "record_every": record_every,
             },
             sort_keys=True,
-        ),  # fmt: skip
+        ),
         "material": _material_json(),
         "p0_pa": 101325.0,
     }
@@ -234,7 +238,8 @@ def write_scene_samples(
         _create(f, shape, Grid(shape, size_m=block).spacing_m, attrs)
         for run, scene in enumerate(scenes):
             rows = [
-                (run, s, p, phi, u) for s, p, phi, u in record_scene(scene, n_steps, record_every)
+                (run, s, p, phi, u)
+                for s, p, phi, u in record_scene(scene, n_steps, record_every, progress=log)
             ]
             if rows:
                 _append(f, rows)
@@ -316,22 +321,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     from diathermy.runtime import configure_threads
 
     configure_threads()
+    try:
+        n = _run_cli(args)
+    except (DiathermyError, ValueError, OSError) as err:  # one line, no traceback
+        a.exit(2, f"{a.prog}: error: {err}\n")
+    print(f"{args.out}: {n} samples")
+    return 0
+
+
+def _run_cli(args: argparse.Namespace) -> int:
     if args.merge:
-        n = merge_datasets(args.merge, args.out)
-    elif args.scene:
-        n = write_scene_samples(
+        return merge_datasets(args.merge, args.out)
+    if args.scene:
+        return write_scene_samples(
             args.scene, args.out, n_steps=args.steps, record_every=args.every,
             grid=tuple(args.grid) if args.grid != EngineSamplesConfig.grid else None,
         )  # fmt: skip
-    else:
-        cfg = EngineSamplesConfig(
-            grid=tuple(args.grid), n_runs=args.runs, n_steps=args.steps,
-            record_every=args.every, seed=args.seed, power_w=tuple(args.power),
-            speed_m_per_s=tuple(args.speed), still_fraction=args.still_fraction,
-        )  # fmt: skip
-        n = write_engine_samples(cfg, args.out)
-    print(f"{args.out}: {n} samples")
-    return 0
+    cfg = EngineSamplesConfig(
+        grid=tuple(args.grid), n_runs=args.runs, n_steps=args.steps,
+        record_every=args.every, seed=args.seed, power_w=tuple(args.power),
+        speed_m_per_s=tuple(args.speed), still_fraction=args.still_fraction,
+    )  # fmt: skip
+    return write_engine_samples(cfg, args.out)
 
 
 if __name__ == "__main__":
