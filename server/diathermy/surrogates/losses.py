@@ -22,31 +22,24 @@ def max_abs_per_sample(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor
     return (pred.float() - target.float()).abs().flatten(1).amax(dim=1)
 
 
-def difference_l2_loss(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """Mean squared error of the forward differences along z, y and x (the discrete strain), 0-d."""
-    p, t = pred.float(), target.float()
-    return sum(
-        (torch.mean(torch.square(torch.diff(p, dim=d) - torch.diff(t, dim=d))) for d in (2, 3, 4)),
-        torch.zeros((), device=p.device),
-    )
-
-
 def training_loss(pred: torch.Tensor, target: torch.Tensor, strain_weight: float) -> torch.Tensor:
-    """L2 displacement loss plus ``strain_weight`` x the difference loss, 0-d tensor.
+    """L2 displacement loss plus ``strain_weight`` x the error of the forward differences, 0-d.
 
     The strain-energy error the model is judged by lives in the displacement's gradients, which
-    a plain L2 loss weighs little; the difference term is rescaled by the batch's
-    mean(u^2) / mean(|D u|^2) so that a weight of 1 makes a relative gradient error count like a
-    relative displacement error.
+    a plain L2 loss weighs little. The mean squared error of the differences along z, y and x
+    (the discrete strain) is rescaled by the batch's mean(u^2) / mean(|D u|^2), so that a weight
+    of 1 makes a relative gradient error count like a relative displacement error.
     """
     loss = l2_loss(pred, target)
     if strain_weight == 0.0:
         return loss
-    t = target.float().detach()
-    ref_u = torch.mean(torch.square(t))
-    ref_du = sum(
-        (torch.mean(torch.square(torch.diff(t, dim=d))) for d in (2, 3, 4)),
-        torch.zeros((), device=t.device),
-    )
-    ratio = torch.where(ref_du > 0, ref_u / ref_du.clamp_min(1e-30), torch.ones_like(ref_u))
-    return loss + strain_weight * ratio * difference_l2_loss(pred, target)
+    p, t = pred.float(), target.float()
+    err = torch.zeros((), device=p.device)
+    ref = torch.zeros((), device=p.device)
+    for d in (2, 3, 4):
+        dt = torch.diff(t, dim=d)
+        err = err + torch.mean(torch.square(torch.diff(p, dim=d) - dt))
+        ref = ref + torch.mean(torch.square(dt.detach()))
+    u2 = torch.mean(torch.square(t.detach()))
+    ratio = torch.where(ref > 0, u2 / ref.clamp_min(1e-30), torch.ones_like(u2))
+    return loss + strain_weight * ratio * err
