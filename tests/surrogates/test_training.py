@@ -15,7 +15,7 @@ import torch
 
 from diathermy.errors import CheckpointError
 from diathermy.surrogates import load_checkpoint
-from diathermy.surrogates.training import TrainConfig, train
+from diathermy.surrogates.training import COSINE_FLOOR, TrainConfig, learning_rate, train
 
 FAST = TrainConfig(width=6, depth=3, epochs=6, batch_size=4, lr=3e-3, patience=50, seed=7)
 
@@ -72,6 +72,58 @@ def test_resume_continues_where_it_stopped(tiny_dataset: Path, tmp_path: Path) -
     assert [h["val_loss"] for h in resumed.history] == [h["val_loss"] for h in full.history]
     a, b = _weights(tmp_path / "full.pt"), _weights(tmp_path / "part.pt")
     assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_cosine_schedule_runs_from_lr_to_its_floor() -> None:
+    assert learning_rate(1e-3, "constant", 0.7) == 1e-3
+    assert learning_rate(1e-3, "cosine", 0.0) == pytest.approx(1e-3)
+    assert learning_rate(1e-3, "cosine", 0.5) == pytest.approx(1e-3 * (1 + COSINE_FLOOR) / 2)
+    assert learning_rate(1e-3, "cosine", 1.0) == pytest.approx(1e-3 * COSINE_FLOOR)
+    steps = [learning_rate(1e-3, "cosine", t) for t in np.linspace(0, 1, 50)]
+    assert all(a > b for a, b in zip(steps, steps[1:], strict=False))
+    with pytest.raises(CheckpointError, match="lr_schedule"):
+        TrainConfig(lr_schedule="step")
+
+
+def test_cosine_resume_follows_the_same_curve(tiny_dataset: Path, tmp_path: Path) -> None:
+    """A run stopped after epoch 1 of 3 and resumed ends at the uninterrupted run's weights."""
+    cfg = replace(FAST, epochs=3, lr_schedule="cosine")
+    full = train(tiny_dataset, tmp_path / "full.pt", cfg, progress=False)
+
+    def stop(entry: dict[str, float]) -> None:
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        train(tiny_dataset, tmp_path / "part.pt", cfg, progress=False, on_epoch=stop)
+    resumed = train(tiny_dataset, tmp_path / "part.pt", cfg, resume=tmp_path / "part.pt",
+                    progress=False)  # fmt: skip
+    assert [h["val_loss"] for h in resumed.history] == [h["val_loss"] for h in full.history]
+    a, b = _weights(tmp_path / "full.pt"), _weights(tmp_path / "part.pt")
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    state = load_checkpoint(tmp_path / "full.pt").training_state
+    assert state is not None
+    lr_last = state["optimizer_state"]["param_groups"][0]["lr"]
+    assert COSINE_FLOOR * FAST.lr <= lr_last < 0.1 * FAST.lr  # decayed to near its floor
+
+
+def test_init_from_starts_at_another_models_weights(tiny_dataset: Path, tmp_path: Path) -> None:
+    base = train(tiny_dataset, tmp_path / "base.pt", replace(FAST, epochs=2), progress=False)
+    zero = train(tiny_dataset, tmp_path / "zero.pt", replace(FAST, epochs=0, seed=3),
+                 init_from=base.checkpoint, progress=False)  # fmt: skip
+    a, b = _weights(base.checkpoint), _weights(zero.checkpoint)
+    assert all(torch.equal(a[k], b[k]) for k in a)  # weights and normaliser buffers alike
+    tuned = train(tiny_dataset, tmp_path / "tuned.pt", replace(FAST, epochs=2),
+                  init_from=base.checkpoint, progress=False)  # fmt: skip
+    assert tuned.val_scenarios == base.val_scenarios  # same seed, same split
+    assert tuned.best_val_loss < base.best_val_loss  # it went on from where base ended
+    with pytest.raises(CheckpointError, match="width/depth"):
+        train(tiny_dataset, tmp_path / "w.pt", replace(FAST, width=5), init_from=base.checkpoint)
+    with pytest.raises(CheckpointError, match="per_sample_amplitude"):
+        train(tiny_dataset, tmp_path / "a.pt", replace(FAST, per_sample_amplitude=False),
+              init_from=base.checkpoint)  # fmt: skip
+    with pytest.raises(CheckpointError, match="exclude each other"):
+        train(tiny_dataset, tmp_path / "x.pt", FAST, resume=base.checkpoint,
+              init_from=base.checkpoint)  # fmt: skip
 
 
 def test_early_stopping(tiny_dataset: Path, tmp_path: Path) -> None:

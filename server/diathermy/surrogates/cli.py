@@ -9,7 +9,10 @@ from __future__ import annotations
 import argparse
 import json
 import os
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from diathermy.surrogates.training import TrainConfig
 
 
 def _positive_int(text: str) -> int:
@@ -59,10 +62,11 @@ def _fraction(text: str) -> float:
     return value
 
 
-def _cmd_train(args: argparse.Namespace) -> int:
-    from diathermy.surrogates.training import TrainConfig, train
+def train_config_from_args(args: argparse.Namespace) -> TrainConfig:
+    """The ``TrainConfig`` that ``diathermy train``'s parsed options describe."""
+    from diathermy.surrogates.training import TrainConfig
 
-    config = TrainConfig(
+    return TrainConfig(
         width=args.width,
         depth=args.depth,
         epochs=args.epochs,
@@ -76,8 +80,23 @@ def _cmd_train(args: argparse.Namespace) -> int:
         num_workers=args.workers,
         per_sample_amplitude=not args.global_amplitude,
         strain_weight=args.strain_weight,
+        lr_schedule=args.lr_schedule,
+        scale_samples=args.scale_samples,
     )
-    result = train(args.data, args.out, config, resume=args.resume, progress=not args.quiet)
+
+
+def _cmd_train(args: argparse.Namespace) -> int:
+    from diathermy.surrogates.training import train
+
+    config = train_config_from_args(args)
+    result = train(
+        args.data,
+        args.out,
+        config,
+        resume=args.resume,
+        init_from=args.init,
+        progress=not args.quiet,
+    )
     if int(os.environ.get("RANK", "0")) != 0:  # under torchrun only rank 0 reports
         return 0
     print(
@@ -161,6 +180,15 @@ def add_train_parser(subparsers: Any) -> None:
     s.add_argument("--patience", type=_positive_int, default=10, help="early-stopping epochs")
     s.add_argument("--seed", type=int, default=0, help="split, initialisation and shuffling seed")
     s.add_argument("--resume", help="continue from a checkpoint written by train")
+    s.add_argument(
+        "--init", metavar="MODEL",
+        help="start from this model's weights and normaliser (fine-tune on new data; fresh "
+        "optimizer and split; width and depth must match)",
+    )  # fmt: skip
+    s.add_argument(
+        "--lr-schedule", choices=["constant", "cosine"], default="constant",
+        help="constant, or cosine: the learning rate decays to 1/100 of --lr over the epochs",
+    )  # fmt: skip
     s.add_argument("--amp", choices=["none", "bf16", "fp16"], default="none", help="autocast")
     s.add_argument("--device", default="auto", help="auto (GPU if any), cpu, cuda, cuda:1 ...")
     s.add_argument("--workers", type=_non_negative_int, default=0, help="DataLoader workers")
@@ -171,6 +199,10 @@ def add_train_parser(subparsers: Any) -> None:
     s.add_argument(
         "--global-amplitude", action="store_true",
         help="scale p - p0 by one dataset-wide constant instead of each sample's max |p - p0|",
+    )  # fmt: skip
+    s.add_argument(
+        "--scale-samples", type=_positive_int, default=256,
+        help="training samples the normaliser is fitted on (256)",
     )  # fmt: skip
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_train)

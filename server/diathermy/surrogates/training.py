@@ -38,6 +38,17 @@ from diathermy.surrogates.losses import relative_l2_per_sample, training_loss
 from diathermy.surrogates.normalization import fit_scales
 
 AMP_DTYPES = {"none": None, "bf16": torch.bfloat16, "fp16": torch.float16}
+LR_SCHEDULES = ("constant", "cosine")
+COSINE_FLOOR = 0.01  # the cosine schedule ends at this fraction of the initial learning rate
+
+
+def learning_rate(lr: float, schedule: str, progress: float) -> float:
+    """The learning rate at ``progress`` in [0, 1] of the planned epochs (a pure function of it,
+    so a resumed run continues the same curve): constant, or a half cosine from lr to lr/100."""
+    if schedule == "constant":
+        return lr
+    t = min(max(progress, 0.0), 1.0)
+    return lr * (COSINE_FLOOR + (1.0 - COSINE_FLOOR) * 0.5 * (1.0 + math.cos(math.pi * t)))
 
 
 @dataclass(frozen=True)
@@ -58,6 +69,7 @@ class TrainConfig:
     scale_samples: int = 256  # training samples used to fit the normaliser
     per_sample_amplitude: bool = True  # input/output scaled by each sample's max |p - p0|
     strain_weight: float = 1.0  # weight of the displacement-difference (strain) loss
+    lr_schedule: str = "constant"  # "constant", or "cosine": lr decays to lr/100 over the epochs
 
     def __post_init__(self) -> None:
         checks = {
@@ -74,6 +86,10 @@ class TrainConfig:
                 raise CheckpointError(f"training option {name} is invalid: {getattr(self, name)!r}")
         if self.amp not in AMP_DTYPES:
             raise CheckpointError(f"amp must be one of {sorted(AMP_DTYPES)}, got {self.amp!r}")
+        if self.lr_schedule not in LR_SCHEDULES:
+            raise CheckpointError(
+                f"lr_schedule must be one of {list(LR_SCHEDULES)}, got {self.lr_schedule!r}"
+            )
         CNNConfig(width=self.width, depth=self.depth)
 
 
@@ -181,8 +197,10 @@ def _start_state(
     config: TrainConfig,
     resume: str | os.PathLike[str] | None,
     split: tuple[tuple[int, ...], tuple[int, ...]] | None,
+    init_from: str | os.PathLike[str] | None = None,
 ) -> tuple[DisplacementCNN, dict[str, Any] | None, tuple[tuple[int, ...], tuple[int, ...]]]:
-    """The model to train (fresh or resumed), the resumed training state, the scenario split."""
+    """The model to train (fresh, resumed or initialised from a checkpoint's weights and
+    normaliser), the resumed training state, the scenario split."""
     if resume is not None:
         ckpt = load_checkpoint(resume, expected_grid=info.grid_shape)
         if ckpt.training_state is None:
@@ -194,6 +212,20 @@ def _start_state(
         return model, ckpt.training_state, (train_s, val_s)
     if split is None:
         split = split_scenarios(info.complete_scenarios(), config.val_fraction, config.seed)
+    if init_from is not None:
+        model = load_checkpoint(init_from, expected_grid=info.grid_shape).model
+        arch = (model.config.width, model.config.depth)
+        if arch != (config.width, config.depth):
+            raise CheckpointError(
+                f"{str(init_from)!r} has width/depth {arch}, the run asks for "
+                f"{(config.width, config.depth)}"
+            )
+        if model.normalizer.per_sample_amplitude != config.per_sample_amplitude:
+            raise CheckpointError(
+                f"{str(init_from)!r} has per_sample_amplitude="
+                f"{model.normalizer.per_sample_amplitude}, the run asks for the other"
+            )
+        return model, None, split
     p, phi, u = read_samples(
         info.path, _scale_indices(info.sample_indices(split[0]), config.scale_samples)
     )
@@ -213,6 +245,7 @@ def train(
     *,
     resume: str | os.PathLike[str] | None = None,
     split: tuple[tuple[int, ...], tuple[int, ...]] | None = None,
+    init_from: str | os.PathLike[str] | None = None,
     progress: bool = True,
     on_epoch: Callable[[dict[str, float]], None] | None = None,
 ) -> TrainResult:
@@ -220,7 +253,9 @@ def train(
 
     ``split`` = (train scenarios, validation scenarios) overrides the seeded random split (used by
     cross-validation); ``resume`` continues a checkpoint written by this function (same split,
-    same normaliser, its optimizer state and epoch counter). ``on_epoch(history entry)`` runs on
+    same normaliser, its optimizer state and epoch counter); ``init_from`` starts from another
+    checkpoint's weights and normaliser (fine-tuning on new data: fresh optimizer, this dataset's
+    split; the architecture must match ``config``). ``on_epoch(history entry)`` runs on
     the main rank after each epoch's checkpoint is written (progress; an exception from it stops
     training with that checkpoint kept, resumable).
     """
@@ -247,6 +282,7 @@ def train(
                 amp_dtype,
                 resume,
                 split,
+                init_from,
                 progress,
                 on_epoch,
             )
@@ -264,10 +300,13 @@ def _train(
     amp_dtype: torch.dtype | None,
     resume: str | os.PathLike[str] | None,
     split: tuple[tuple[int, ...], tuple[int, ...]] | None,
+    init_from: str | os.PathLike[str] | None,
     progress: bool,
     on_epoch: Callable[[dict[str, float]], None] | None = None,
 ) -> TrainResult:
-    net, state, (train_s, val_s) = _start_state(info, config, resume, split)
+    if resume is not None and init_from is not None:
+        raise CheckpointError("resume and init_from exclude each other")
+    net, state, (train_s, val_s) = _start_state(info, config, resume, split, init_from)
     if set(train_s) & set(val_s) or not train_s or not val_s:
         raise CheckpointError(f"bad scenario split: train {train_s}, validation {val_s}")
     net.to(device)
@@ -304,6 +343,7 @@ def _train(
             return contextlib.nullcontext()
         return torch.autocast(device_type=device.type, dtype=amp_dtype)
 
+    planned_steps = config.epochs * len(train_loader)
     total_steps = max(config.epochs - start_epoch, 0) * len(train_loader)
     bar = tqdm(
         total=total_steps, disable=not (progress and ctx.is_main), unit="batch", dynamic_ncols=True
@@ -317,8 +357,11 @@ def _train(
             sampler.set_epoch(epoch)
             model.train()
             running, seen = 0.0, 0
-            for p, phi, u in train_loader:
+            for i, (p, phi, u) in enumerate(train_loader):
                 p, phi, u = p.to(device), phi.to(device), u.to(device)
+                progress_done = (epoch * len(train_loader) + i) / max(planned_steps, 1)
+                for group in optimizer.param_groups:
+                    group["lr"] = learning_rate(config.lr, config.lr_schedule, progress_done)
                 optimizer.zero_grad(set_to_none=True)
                 with autocast():
                     pred = model(net.normalizer.encode_inputs(p, phi))

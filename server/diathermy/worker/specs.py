@@ -92,6 +92,7 @@ class TrainOptions(_Spec):
     scale_samples: Annotated[int, Field(ge=1)] = 256
     per_sample_amplitude: bool = True
     strain_weight: Annotated[float, Field(ge=0, le=1e3, allow_inf_nan=False)] = 1.0
+    lr_schedule: Literal["constant", "cosine"] = "constant"
 
 
 class TrainingJobSpec(_Spec):

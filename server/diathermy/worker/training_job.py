@@ -38,8 +38,13 @@ def torchrun_command(
         "--epochs", str(config.epochs), "--batch-size", str(config.batch_size),
         "--lr", repr(config.lr), "--val-fraction", repr(config.val_fraction),
         "--patience", str(config.patience), "--seed", str(config.seed), "--amp", config.amp,
-        "--device", config.device, "--workers", str(config.num_workers), "--quiet",
+        "--device", config.device, "--workers", str(config.num_workers),
+        "--strain-weight", repr(config.strain_weight), "--lr-schedule", config.lr_schedule,
+        "--scale-samples", str(config.scale_samples),
+        "--quiet",
     ]  # fmt: skip
+    if not config.per_sample_amplitude:
+        cmd.append("--global-amplitude")
     return cmd + (["--resume", str(resume)] if resume is not None else [])
 
 
