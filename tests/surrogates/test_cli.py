@@ -27,6 +27,21 @@ def test_train_writes_a_checkpoint(
     assert load_checkpoint(out).training_state["epoch"] == 3  # type: ignore[index]
 
 
+def test_train_holds_out_the_named_scenarios_and_fine_tunes(
+    tiny_dataset: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    base, tuned = tmp_path / "base.pt", tmp_path / "tuned.pt"
+    common = ["--width", "4", "--depth", "2", "--quiet", "--val-scenarios", "1", "4"]
+    assert main(["train", str(tiny_dataset), "--out", str(base), "--epochs", "1", *common]) == 0
+    assert "validation scenarios [1, 4]" in capsys.readouterr().out
+    assert load_checkpoint(base).data["train_scenarios"] == [0, 2, 3, 5]
+    argv = ["train", str(tiny_dataset), "--out", str(tuned), "--epochs", "1", "--init", str(base),
+            "--lr-schedule", "cosine", *common]  # fmt: skip
+    assert main(argv) == 0
+    ckpt = load_checkpoint(tuned)
+    assert ckpt.training_config["lr_schedule"] == "cosine" and ckpt.data["val_scenarios"] == [1, 4]
+
+
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
@@ -35,6 +50,13 @@ def test_train_writes_a_checkpoint(
         (["train", "DATA", "--out", "m.pt", "--val-fraction", "1.5"], "fraction"),
         (["train", "DATA", "--out", "m.pt", "--amp", "fp16", "--device", "cpu"], "fp16"),
         (["train", "DATA", "--out", "m.pt", "--device", "cuda:7"], "CUDA"),
+        (["train", "DATA", "--out", "m.pt", "--val-scenarios", "3", "99"], "[99]"),
+        (
+            ["train", "DATA", "--out", "m.pt", "--val-scenarios", "0", "1", "2", "3", "4", "5"],
+            "at least one",
+        ),
+        (["train", "DATA", "--out", "m.pt", "--init", "missing.pt"], "does not exist"),
+        (["train", "DATA", "--out", "m.pt", "--lr-schedule", "step"], "invalid choice"),
         (["evaluate", "DATA", "DATA"], "not a readable diathermy CNN checkpoint"),
         (["evaluate", "missing.pt", "DATA"], "does not exist"),
     ],

@@ -86,14 +86,19 @@ def train_config_from_args(args: argparse.Namespace) -> TrainConfig:
 
 
 def _cmd_train(args: argparse.Namespace) -> int:
+    from diathermy.surrogates.data import chosen_split, read_dataset_info
     from diathermy.surrogates.training import train
 
     config = train_config_from_args(args)
+    split = None
+    if args.val_scenarios:
+        split = chosen_split(read_dataset_info(args.data).complete_scenarios(), args.val_scenarios)
     result = train(
         args.data,
         args.out,
         config,
         resume=args.resume,
+        split=split,
         init_from=args.init,
         progress=not args.quiet,
     )
@@ -178,6 +183,10 @@ def add_train_parser(subparsers: Any) -> None:
     s.add_argument("--lr", type=_positive_float, default=1e-3, help="Adam learning rate")
     s.add_argument("--val-fraction", type=_fraction, default=0.2, help="scenarios held out (0.2)")
     s.add_argument("--patience", type=_positive_int, default=10, help="early-stopping epochs")
+    s.add_argument(
+        "--val-scenarios", type=_non_negative_int, nargs="+", metavar="N",
+        help="hold out these scenarios for validation instead of a seeded --val-fraction draw",
+    )  # fmt: skip
     s.add_argument("--seed", type=int, default=0, help="split, initialisation and shuffling seed")
     s.add_argument("--resume", help="continue from a checkpoint written by train")
     s.add_argument(

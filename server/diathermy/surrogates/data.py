@@ -186,6 +186,23 @@ def split_scenarios(
     return tuple(sorted(order[n_val:].tolist())), tuple(sorted(order[:n_val].tolist()))
 
 
+def chosen_split(
+    scenarios: tuple[int, ...] | list[int], validation: tuple[int, ...] | list[int]
+) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """(train, validation) with the validation scenarios named: all others train."""
+    ids = sorted(set(int(s) for s in scenarios))
+    val = sorted(set(int(s) for s in validation))
+    unknown = sorted(set(val) - set(ids))
+    if unknown:
+        raise CheckpointError(f"validation scenarios {unknown} are not complete scenarios {ids}")
+    train = [s for s in ids if s not in val]
+    if not val or not train:
+        raise CheckpointError(
+            f"validation {val} must leave at least one of the scenarios {ids} for training"
+        )
+    return tuple(train), tuple(val)
+
+
 def kfold_scenarios(
     scenarios: tuple[int, ...] | list[int], k: int, seed: int
 ) -> list[tuple[tuple[int, ...], tuple[int, ...]]]:
