@@ -81,6 +81,7 @@ def train_config_from_args(args: argparse.Namespace) -> TrainConfig:
         per_sample_amplitude=not args.global_amplitude,
         strain_weight=args.strain_weight,
         lr_schedule=args.lr_schedule,
+        energy_weight=args.energy_weight,
         scale_samples=args.scale_samples,
     )
 
@@ -204,6 +205,11 @@ def add_train_parser(subparsers: Any) -> None:
     s.add_argument(
         "--strain-weight", type=_non_negative_float, default=1.0,
         help="weight of the strain (displacement-difference) loss beside the L2 loss (1.0)",
+    )  # fmt: skip
+    s.add_argument(
+        "--energy-weight", type=_non_negative_float, default=0.0,
+        help="weight of the squared relative strain-energy error (the accuracy measure, eq. "
+        "20/21, with E per tet from the level set) beside the other terms (0)",
     )  # fmt: skip
     s.add_argument(
         "--global-amplitude", action="store_true",

@@ -4,6 +4,11 @@ from __future__ import annotations
 
 import torch
 
+from diathermy.surrogates.strain_energy import (
+    GridStrainEnergy,
+    relative_strain_energy_error_squared,
+)
+
 
 def l2_loss(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     """Mean squared error over every component and node (the training objective), 0-d tensor."""
@@ -22,15 +27,34 @@ def max_abs_per_sample(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor
     return (pred.float() - target.float()).abs().flatten(1).amax(dim=1)
 
 
-def training_loss(pred: torch.Tensor, target: torch.Tensor, strain_weight: float) -> torch.Tensor:
-    """L2 displacement loss plus ``strain_weight`` x the error of the forward differences, 0-d.
+def training_loss(
+    pred: torch.Tensor,
+    target: torch.Tensor,
+    strain_weight: float,
+    energy_weight: float = 0.0,
+    strain_energy: GridStrainEnergy | None = None,
+    level_set: torch.Tensor | None = None,
+) -> torch.Tensor:
+    """L2 displacement loss + ``strain_weight`` x the error of the forward differences
+    + ``energy_weight`` x the batch mean of the squared relative strain-energy error, 0-d.
 
     The strain-energy error the model is judged by lives in the displacement's gradients, which
     a plain L2 loss weighs little. The mean squared error of the differences along z, y and x
     (the discrete strain) is rescaled by the batch's mean(u^2) / mean(|D u|^2), so that a weight
     of 1 makes a relative gradient error count like a relative displacement error.
+
+    The energy term is the accuracy measure itself (eq. 20/21, squared), W per tet of the mesh
+    by ``strain_energy`` under ``level_set`` (N, D, H, W): it weighs the tets by their energy,
+    so the soft removed tissue in a crater, whose displacement is large but stores almost
+    nothing, stops dominating the loss as it does the L2 term.
     """
     loss = l2_loss(pred, target)
+    if energy_weight != 0.0:
+        if strain_energy is None or level_set is None:
+            raise ValueError("the energy term needs strain_energy and level_set")
+        W = strain_energy(pred, level_set)
+        W_ref = strain_energy(target.detach(), level_set)
+        loss = loss + energy_weight * relative_strain_energy_error_squared(W, W_ref).mean()
     if strain_weight == 0.0:
         return loss
     p, t = pred.float(), target.float()

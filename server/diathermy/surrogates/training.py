@@ -25,6 +25,7 @@ from torch.utils.data import DataLoader, DistributedSampler
 from tqdm import tqdm
 
 from diathermy.errors import CheckpointError
+from diathermy.physics.materials import Tissue
 from diathermy.surrogates.checkpoint import load_checkpoint, save_checkpoint
 from diathermy.surrogates.cnn import CNNConfig, DisplacementCNN
 from diathermy.surrogates.data import (
@@ -36,6 +37,7 @@ from diathermy.surrogates.data import (
 )
 from diathermy.surrogates.losses import relative_l2_per_sample, training_loss
 from diathermy.surrogates.normalization import fit_scales
+from diathermy.surrogates.strain_energy import GridStrainEnergy
 
 AMP_DTYPES = {"none": None, "bf16": torch.bfloat16, "fp16": torch.float16}
 LR_SCHEDULES = ("constant", "cosine")
@@ -70,6 +72,7 @@ class TrainConfig:
     per_sample_amplitude: bool = True  # input/output scaled by each sample's max |p - p0|
     strain_weight: float = 1.0  # weight of the displacement-difference (strain) loss
     lr_schedule: str = "constant"  # "constant", or "cosine": lr decays to lr/100 over the epochs
+    energy_weight: float = 0.0  # weight of the squared relative strain-energy error (eq. 20/21)
 
     def __post_init__(self) -> None:
         checks = {
@@ -80,6 +83,7 @@ class TrainConfig:
             "num_workers": self.num_workers >= 0,
             "scale_samples": self.scale_samples >= 1,
             "strain_weight": math.isfinite(self.strain_weight) and self.strain_weight >= 0,
+            "energy_weight": math.isfinite(self.energy_weight) and self.energy_weight >= 0,
         }
         for name, ok in checks.items():
             if not ok:
@@ -169,13 +173,34 @@ def _scale_indices(indices: np.ndarray, n: int) -> np.ndarray:
     return indices[np.linspace(0, indices.size - 1, n).round().astype(np.int64)]
 
 
+LossFn = Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]
+
+
+def loss_function(config: TrainConfig, info: DatasetInfo, device: torch.device) -> LossFn:
+    """(prediction, target in network units, level set m) -> the configured training loss."""
+    energy = None
+    if config.energy_weight > 0:
+        known = set(Tissue.__dataclass_fields__)
+        tissue = Tissue(**{k: v for k, v in info.material.items() if k in known})
+        energy = GridStrainEnergy(
+            info.spacing_m, tissue.poisson_ratio, tissue.ersatz_stiffness_ratio
+        ).to(device)
+
+    def loss(pred: torch.Tensor, target: torch.Tensor, level_set: torch.Tensor) -> torch.Tensor:
+        return training_loss(
+            pred, target, config.strain_weight, config.energy_weight, energy, level_set
+        )
+
+    return loss
+
+
 def _evaluate_loss(
     model: torch.nn.Module,
     net: DisplacementCNN,
     loader: DataLoader,
     device: torch.device,
     autocast: Callable[[], contextlib.AbstractContextManager[Any]],
-    strain_weight: float,
+    loss_fn: LossFn,
 ) -> tuple[float, float]:
     """(mean training loss, mean relative L2 error of u) over a loader."""
     model.eval()
@@ -186,7 +211,7 @@ def _evaluate_loss(
             with autocast():
                 pred = model(net.normalizer.encode_inputs(p, phi)).float()
             target = net.normalizer.encode_displacement(u, p)
-            total += float(training_loss(pred, target, strain_weight)) * p.shape[0]
+            total += float(loss_fn(pred, target, phi)) * p.shape[0]
             rel += float(relative_l2_per_sample(pred, target).sum())
             count += p.shape[0]
     return total / max(count, 1), rel / max(count, 1)
@@ -344,6 +369,7 @@ def _train(
         return torch.autocast(device_type=device.type, dtype=amp_dtype)
 
     planned_steps = config.epochs * len(train_loader)
+    loss_fn = loss_function(config, info, device)
     total_steps = max(config.epochs - start_epoch, 0) * len(train_loader)
     bar = tqdm(
         total=total_steps, disable=not (progress and ctx.is_main), unit="batch", dynamic_ncols=True
@@ -366,7 +392,7 @@ def _train(
                 with autocast():
                     pred = model(net.normalizer.encode_inputs(p, phi))
                 target = net.normalizer.encode_displacement(u, p)
-                loss = training_loss(pred, target, config.strain_weight)
+                loss = loss_fn(pred, target, phi)
                 scaler.scale(loss).backward()
                 scaler.step(optimizer)
                 scaler.update()
@@ -376,9 +402,7 @@ def _train(
                 bar.set_postfix(
                     epoch=epoch + 1, loss=f"{running / seen:.4g}", val=f"{best_val:.4g}"
                 )
-            val_loss, val_rel = _evaluate_loss(
-                model, net, val_loader, device, autocast, config.strain_weight
-            )
+            val_loss, val_rel = _evaluate_loss(model, net, val_loader, device, autocast, loss_fn)
             if val_loss < best_val:
                 best_val, best_rel, best_epoch, bad = val_loss, val_rel, epoch + 1, 0
                 best_weights = copy.deepcopy(net.state_dict())

@@ -93,6 +93,7 @@ class TrainOptions(_Spec):
     per_sample_amplitude: bool = True
     strain_weight: Annotated[float, Field(ge=0, le=1e3, allow_inf_nan=False)] = 1.0
     lr_schedule: Literal["constant", "cosine"] = "constant"
+    energy_weight: Annotated[float, Field(ge=0, le=1e3, allow_inf_nan=False)] = 0.0
 
 
 class TrainingJobSpec(_Spec):

@@ -41,6 +41,7 @@ def torchrun_command(
         "--device", config.device, "--workers", str(config.num_workers),
         "--strain-weight", repr(config.strain_weight), "--lr-schedule", config.lr_schedule,
         "--scale-samples", str(config.scale_samples),
+        "--energy-weight", repr(config.energy_weight),
         "--quiet",
     ]  # fmt: skip
     if not config.per_sample_amplitude:
