@@ -57,6 +57,10 @@ def test_train_holds_out_the_named_scenarios_and_fine_tunes(
         ),
         (["train", "DATA", "--out", "m.pt", "--init", "missing.pt"], "does not exist"),
         (["train", "DATA", "--out", "m.pt", "--lr-schedule", "step"], "invalid choice"),
+        (
+            ["train", "DATA", "--out", "m.pt", "--resume", "m.pt", "--val-scenarios", "1"],
+            "keeps its checkpoint's scenario split",
+        ),
         (["evaluate", "DATA", "DATA"], "not a readable diathermy CNN checkpoint"),
         (["evaluate", "missing.pt", "DATA"], "does not exist"),
     ],

@@ -25,6 +25,12 @@ def tet_youngs_modulus(level_set_m: np.ndarray, tets: np.ndarray, tissue: Tissue
     return np.where(phi_tet > 0.0, E, tissue.ersatz_stiffness_ratio * E)
 
 
+def dataset_tissue(material: Mapping[str, Any] | None) -> Tissue:
+    """The Tissue of a dataset's material record (unknown keys ignored, defaults for the rest)."""
+    known = set(Tissue.__dataclass_fields__)
+    return Tissue(**{k: v for k, v in (material or {}).items() if k in known})
+
+
 def strain_energy_error_on_grid(
     grid_shape: tuple[int, int, int],
     spacing_m: tuple[float, float, float],
@@ -35,8 +41,7 @@ def strain_energy_error_on_grid(
     ``spacing_m`` (dx, dy, dz); ``material`` the dataset's Tissue parameters (defaults for the
     rest). W uses E per tet from the reference level set, so both fields are weighed alike.
     """
-    known = set(Tissue.__dataclass_fields__)
-    tissue = Tissue(**{k: v for k, v in (material or {}).items() if k in known})
+    tissue = dataset_tissue(material)
     nz, ny, nx = grid_shape
     dx, dy, dz = spacing_m
     grid = Grid((nz, ny, nx), size_m=(dx * (nx - 1), dy * (ny - 1), dz * (nz - 1)))

@@ -25,7 +25,7 @@ from torch.utils.data import DataLoader, DistributedSampler
 from tqdm import tqdm
 
 from diathermy.errors import CheckpointError
-from diathermy.physics.materials import Tissue
+from diathermy.physics.strain_energy_error import dataset_tissue
 from diathermy.surrogates.checkpoint import load_checkpoint, save_checkpoint
 from diathermy.surrogates.cnn import CNNConfig, DisplacementCNN
 from diathermy.surrogates.data import (
@@ -180,8 +180,7 @@ def loss_function(config: TrainConfig, info: DatasetInfo, device: torch.device) 
     """(prediction, target in network units, level set m) -> the configured training loss."""
     energy = None
     if config.energy_weight > 0:
-        known = set(Tissue.__dataclass_fields__)
-        tissue = Tissue(**{k: v for k, v in info.material.items() if k in known})
+        tissue = dataset_tissue(info.material)
         energy = GridStrainEnergy(
             info.spacing_m, tissue.poisson_ratio, tissue.ersatz_stiffness_ratio
         ).to(device)
@@ -331,6 +330,8 @@ def _train(
 ) -> TrainResult:
     if resume is not None and init_from is not None:
         raise CheckpointError("resume and init_from exclude each other")
+    if resume is not None and split is not None:
+        raise CheckpointError("a resumed run keeps its checkpoint's scenario split; give no split")
     net, state, (train_s, val_s) = _start_state(info, config, resume, split, init_from)
     if set(train_s) & set(val_s) or not train_s or not val_s:
         raise CheckpointError(f"bad scenario split: train {train_s}, validation {val_s}")
