@@ -21,8 +21,9 @@ from tests.worker.conftest import ROOT, TINY, WorkerProcess, log_lines, wait_for
 
 SLOW = {"grid": [7, 7, 13], "n_scenarios": 12, "n_steps": 3, "seed": 5}
 """Long enough (a few seconds per scenario batch on a busy machine) to interrupt mid-job."""
-UNFINISHABLE = {**SLOW, "n_scenarios": 60}  # <= the 72 start tets of a 7x7 top
-"""For the cancel test: on an idle machine SLOW can finish before the cancel lands (seen in CI)."""
+UNFINISHABLE = {**SLOW, "n_scenarios": 60, "n_steps": 150}  # <= the 72 start tets of a 7x7 top
+"""For the cancel test: about a minute of work on an idle machine (~1 s a scenario), so the
+cancel always lands first; SLOW (0.1 s a scenario idle) finished before it in CI."""
 
 
 def sse_events(api: httpx.Client, job_id: str) -> Iterator[tuple[str, dict]]:
