@@ -116,6 +116,17 @@ def test_init_from_starts_at_another_models_weights(tiny_dataset: Path, tmp_path
                   init_from=base.checkpoint, progress=False)  # fmt: skip
     assert tuned.val_scenarios == base.val_scenarios  # same seed, same split
     assert tuned.best_val_loss < base.best_val_loss  # it went on from where base ended
+    lineage = load_checkpoint(tuned.checkpoint).data["init_from"]  # where it started is recorded
+    assert lineage["path"] == str(base.checkpoint) and lineage["init_from"] is None
+    assert lineage["metrics"]["best_val_loss"] == base.best_val_loss
+    again = train(tiny_dataset, tmp_path / "again.pt", replace(FAST, epochs=1),
+                  init_from=tuned.checkpoint, progress=False)  # fmt: skip
+    chain = load_checkpoint(again.checkpoint).data["init_from"]
+    assert chain["path"] == str(tuned.checkpoint) and chain["init_from"] == lineage
+    assert "init_from" not in load_checkpoint(base.checkpoint).data
+    train(tiny_dataset, again.checkpoint, replace(FAST, epochs=2), resume=again.checkpoint,
+          progress=False)  # fmt: skip
+    assert load_checkpoint(again.checkpoint).data["init_from"] == chain  # a resume keeps it
     with pytest.raises(CheckpointError, match="width/depth"):
         train(tiny_dataset, tmp_path / "w.pt", replace(FAST, width=5), init_from=base.checkpoint)
     with pytest.raises(CheckpointError, match="per_sample_amplitude"):

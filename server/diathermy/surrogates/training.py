@@ -26,7 +26,7 @@ from tqdm import tqdm
 
 from diathermy.errors import CheckpointError
 from diathermy.physics.strain_energy_error import dataset_tissue
-from diathermy.surrogates.checkpoint import load_checkpoint, save_checkpoint
+from diathermy.surrogates.checkpoint import LoadedCheckpoint, load_checkpoint, save_checkpoint
 from diathermy.surrogates.cnn import CNNConfig, DisplacementCNN
 from diathermy.surrogates.data import (
     DatasetInfo,
@@ -110,6 +110,15 @@ class TrainResult:
     history: tuple[dict[str, float], ...]
     train_scenarios: tuple[int, ...]
     val_scenarios: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class _Start:
+    """Where a run starts: the model, a resumed run's training state, the fine-tune lineage."""
+
+    model: DisplacementCNN
+    training_state: dict[str, Any] | None
+    lineage: dict[str, Any] | None
 
 
 @dataclass(frozen=True)
@@ -222,9 +231,9 @@ def _start_state(
     resume: str | os.PathLike[str] | None,
     split: tuple[tuple[int, ...], tuple[int, ...]] | None,
     init_from: str | os.PathLike[str] | None = None,
-) -> tuple[DisplacementCNN, dict[str, Any] | None, tuple[tuple[int, ...], tuple[int, ...]]]:
+) -> tuple[_Start, tuple[tuple[int, ...], tuple[int, ...]]]:
     """The model to train (fresh, resumed or initialised from a checkpoint's weights and
-    normaliser), the resumed training state, the scenario split."""
+    normaliser), the resumed training state and lineage, the scenario split."""
     if resume is not None:
         ckpt = load_checkpoint(resume, expected_grid=info.grid_shape)
         if ckpt.training_state is None:
@@ -233,11 +242,12 @@ def _start_state(
         model.load_state_dict(ckpt.training_state["model_state"])
         train_s = tuple(int(s) for s in ckpt.data.get("train_scenarios", ()))
         val_s = tuple(int(s) for s in ckpt.data.get("val_scenarios", ()))
-        return model, ckpt.training_state, (train_s, val_s)
+        return _Start(model, ckpt.training_state, ckpt.data.get("init_from")), (train_s, val_s)
     if split is None:
         split = split_scenarios(info.complete_scenarios(), config.val_fraction, config.seed)
     if init_from is not None:
-        model = load_checkpoint(init_from, expected_grid=info.grid_shape).model
+        parent = load_checkpoint(init_from, expected_grid=info.grid_shape)
+        model = parent.model
         arch = (model.config.width, model.config.depth)
         if arch != (config.width, config.depth):
             raise CheckpointError(
@@ -249,7 +259,7 @@ def _start_state(
                 f"{str(init_from)!r} has per_sample_amplitude="
                 f"{model.normalizer.per_sample_amplitude}, the run asks for the other"
             )
-        return model, None, split
+        return _Start(model, None, init_record(init_from, parent)), split
     p, phi, u = read_samples(
         info.path, _scale_indices(info.sample_indices(split[0]), config.scale_samples)
     )
@@ -259,7 +269,19 @@ def _start_state(
         CNNConfig(width=config.width, depth=config.depth),
         fit_scales(p, phi, u, p0_pa=p0, per_sample_amplitude=config.per_sample_amplitude),
     )
-    return model, None, split
+    return _Start(model, None, None), split
+
+
+def init_record(path: str | os.PathLike[str], parent: LoadedCheckpoint) -> dict[str, Any]:
+    """Where a fine-tuned model's starting weights came from: the parent's file, data, config,
+    metrics and (recursively) its own parent, so a chain of fine-tunes stays traceable."""
+    return {
+        "path": str(path),
+        "data_path": parent.data.get("path"),
+        "training_config": parent.training_config,
+        "metrics": parent.metrics,
+        "init_from": parent.data.get("init_from"),
+    }
 
 
 def train(
@@ -332,7 +354,8 @@ def _train(
         raise CheckpointError("resume and init_from exclude each other")
     if resume is not None and split is not None:
         raise CheckpointError("a resumed run keeps its checkpoint's scenario split; give no split")
-    net, state, (train_s, val_s) = _start_state(info, config, resume, split, init_from)
+    start, (train_s, val_s) = _start_state(info, config, resume, split, init_from)
+    net, state = start.model, start.training_state
     if set(train_s) & set(val_s) or not train_s or not val_s:
         raise CheckpointError(f"bad scenario split: train {train_s}, validation {val_s}")
     net.to(device)
@@ -428,6 +451,7 @@ def _train(
                     config,
                     train_s,
                     val_s,
+                    start.lineage,
                     {
                         "epoch": epoch + 1,
                         "model_state": {
@@ -449,7 +473,7 @@ def _train(
     finally:
         bar.close()
     if ctx.is_main and not history and resume is None:  # epochs=0: still write a usable model
-        _save(out_path, net, best_weights, info, config, train_s, val_s, None)
+        _save(out_path, net, best_weights, info, config, train_s, val_s, start.lineage, None)
     epochs_run = len(history)
     return TrainResult(
         checkpoint=out_path,
@@ -472,6 +496,7 @@ def _save(
     config: TrainConfig,
     train_s: tuple[int, ...],
     val_s: tuple[int, ...],
+    lineage: dict[str, Any] | None,
     training_state: dict[str, Any] | None,
 ) -> None:
     """Checkpoint whose weights are the best so far and whose training state is the latest."""
@@ -496,6 +521,7 @@ def _save(
             "path": str(info.path),
             "train_scenarios": list(train_s),
             "val_scenarios": list(val_s),
+            **({"init_from": lineage} if lineage is not None else {}),
         },
         training_state=training_state,
     )
