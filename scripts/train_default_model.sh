@@ -9,10 +9,15 @@
 #    (slow enough to boil and cut on this grid), 30 % held still, every 3rd mechanics step. The
 #    built-in benchmark scenes are never generated (they are benchmarks/hybrid.py's held-out test)
 # 3. merge, train (width 8, per-sample amplitude normalisation, strain loss, scenario-wise
-#    validation split), evaluate on the validation scenarios, on everything, and on the held-out
-#    test set: every 4th mechanics step of FEM runs of fixed-electrode and moving-electrode-slow
-# 4. copy the model and its metrics into the package
-# About 1.5 h of one core on an idle machine; the shipped model was made on 2 shared cores.
+#    validation split): the stage-1 model
+# 4. crater samples: 6 runs of 300 steps, power 40-80 W, speed 1-3 mm/s, 30 % still, every 2nd
+#    mechanics step (cut states: craters with the electrode at their bottom, where stage 1 fails)
+# 5. fine-tune stage 1 on everything (--init, cosine learning rate, --energy-weight: the relative
+#    strain-energy error in the loss), keeping stage 1's validation scenarios plus one crater run
+# 6. evaluate on the validation scenarios, on everything, and on the held-out test set: every 4th
+#    mechanics step of FEM runs of fixed-electrode and moving-electrode-slow
+# 7. copy the model and its metrics into the package
+# About 3 h of one core on an idle machine; the shipped model was made on 2 shared cores.
 set -euo pipefail
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
 WORK="${1:-$ROOT/runs/default_model}"
@@ -31,11 +36,18 @@ python -m diathermy.datagen.engine_samples --merge "$WORK/alg1.h5" "$WORK/engine
     "$WORK/engine_slow.h5" --out "$WORK/train.h5"
 python -m diathermy.datagen.engine_samples --scene fixed-electrode moving-electrode-slow \
     --steps 400 --every 4 --out "$WORK/test.h5"
-python -m diathermy train "$WORK/train.h5" --out "$WORK/model.pt" --width 8 --depth 5 \
+python -m diathermy train "$WORK/train.h5" --out "$WORK/stage1.pt" --width 8 --depth 5 \
     --epochs 14 --patience 4 --lr 2e-3 --batch-size 4 --val-fraction 0.15 --seed 0 --device cpu --quiet
-python -m diathermy evaluate "$WORK/model.pt" "$WORK/train.h5" --subset validation \
+python -m diathermy.datagen.engine_samples --out "$WORK/crater.h5" --runs 6 --steps 300 --every 2 \
+    --seed 13 --power 40 80 --speed 1e-3 3e-3 --still-fraction 0.3
+python -m diathermy.datagen.engine_samples --merge "$WORK/train.h5" "$WORK/crater.h5" --out "$WORK/all.h5"
+# stage 1's validation scenarios (seed 0, 15 %) are 2, 3 and 10; 24 is the last crater run
+python -m diathermy train "$WORK/all.h5" --out "$WORK/model.pt" --init "$WORK/stage1.pt" --width 8 \
+    --depth 5 --epochs 8 --patience 4 --lr 2e-3 --lr-schedule cosine --batch-size 4 \
+    --val-scenarios 2 3 10 24 --energy-weight 1 --seed 0 --device cpu --quiet
+python -m diathermy evaluate "$WORK/model.pt" "$WORK/all.h5" --subset validation \
     --json "$WORK/metrics_validation.json"
-python -m diathermy evaluate "$WORK/model.pt" "$WORK/train.h5" --json "$WORK/metrics_all.json"
+python -m diathermy evaluate "$WORK/model.pt" "$WORK/all.h5" --json "$WORK/metrics_all.json"
 python -m diathermy evaluate "$WORK/model.pt" "$WORK/test.h5" --json "$WORK/metrics_test.json"
 python - "$WORK" "$MODELS/cnn_33x33x65" <<'PY'
 import json, sys
