@@ -61,7 +61,8 @@ val = json.loads((work / "metrics_validation.json").read_text())["summary"]
 every = json.loads((work / "metrics_all.json").read_text())["summary"]
 test = json.loads((work / "metrics_test.json").read_text())["summary"]
 meta = {"validation": val, "all_samples": every,
-        "held_out_test": {"scenes": ["fixed-electrode", "moving-electrode-slow"], **test},
+        "held_out_test": {"scenes": ["fixed-electrode", "moving-electrode-slow"], "steps": 400,
+                          "every": 4, **test},
         "training": ckpt.get("training_config", {}),
         "data": ckpt.get("data", {}), "trained_by": "scripts/train_default_model.sh"}
 Path(dest + ".json").write_text(json.dumps(meta, indent=2) + "\n")
