@@ -85,3 +85,16 @@ def test_accuracy_budget_picks_cheapest_meeting_it(report, monkeypatch, tmp_path
     monkeypatch.setenv("DIATHERMY_ACCURACY_REPORT", str(out / "missing.json"))
     with pytest.raises(SceneError, match="cannot be read"):
         resolve_accuracy_budget(budgeted)
+
+
+def test_accuracy_budget_ignores_runs_that_never_reached_the_mechanics(report):
+    _, rows, _ = report
+    measured = [asdict(r) for r in rows]
+    # a cheaper variant whose run never solved the mechanics: error 0 by construction only
+    vacuous = {**measured[0], "variant": "cnn-w8", "compared_steps": 0, "se_error_max": 0.0,
+               "step_median_s": 0.0}  # fmt: skip
+    data = {"rows": [*measured, vacuous]}
+    pick = cheapest_within(data, scene="tiny", max_strain_energy_error=1.0)
+    assert pick["variant"] != "cnn-w8" and pick["compared_steps"] > 0
+    with pytest.raises(SceneError, match="never reached the mechanics"):
+        cheapest_within({"rows": [vacuous]}, scene="tiny", max_strain_energy_error=1.0)

@@ -34,6 +34,14 @@ def cheapest_within(
         raise SceneError(
             f"accuracy_budget: the accuracy report has no measurements for scene {scene!r}"
         )
+    # a run that never reached the mechanics has error 0 by construction: no evidence at all
+    rows = [r for r in rows if r.get("compared_steps", 1) > 0]
+    if not rows:
+        raise SceneError(
+            f"accuracy_budget: the accuracy report's runs of {scene!r} never reached the "
+            "mechanics (0 compared steps), so they say nothing about its error; measure it "
+            "with more steps (diathermy report accuracy-cost --steps N)"
+        )
     ok = [r for r in rows if r["se_error_max"] <= max_strain_energy_error]
     if not ok:
         best = min(r["se_error_max"] for r in rows)
