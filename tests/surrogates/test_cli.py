@@ -40,6 +40,9 @@ def test_train_holds_out_the_named_scenarios_and_fine_tunes(
     assert main(argv) == 0
     ckpt = load_checkpoint(tuned)
     assert ckpt.training_config["lr_schedule"] == "cosine" and ckpt.data["val_scenarios"] == [1, 4]
+    assert main([*argv, "--out", str(tmp_path / "mask.pt"), "--mask-input"]) == 0
+    masked = load_checkpoint(tmp_path / "mask.pt")
+    assert masked.model.config.mask_input and masked.training_config["mask_input"]
 
 
 @pytest.mark.parametrize(

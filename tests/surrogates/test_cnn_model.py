@@ -177,6 +177,37 @@ def test_corrupt_foreign_and_future_files_are_refused(tmp_path: Path) -> None:
         assert "\n" not in str(info.value)
 
 
+def test_mask_channel_widening_keeps_the_prediction_and_the_mask_then_matters(
+    tmp_path: Path,
+) -> None:
+    torch.manual_seed(0)
+    model = DisplacementCNN(CNNConfig(width=4, depth=2)).eval()
+    wide = model.with_mask_input().eval()
+    assert wide.config.mask_input and wide.stem.conv.weight.shape[1] == 3
+    assert not torch.any(wide.stem.conv.weight[:, 2])  # the new channel starts at zero weight
+    p, phi = _fields((9, 9, 17), seed=2)
+    np.testing.assert_array_equal(predict(wide, p, phi), predict(model, p, phi))
+    # once the mask weights are not zero, the output changes where phi changes sign, and only
+    # through that sign: phi scaled by a positive factor keeps the mask
+    with torch.no_grad():
+        wide.stem.conv.weight[:, 2] = 0.3
+    assert not np.allclose(predict(wide, p, phi), predict(model, p, phi))
+    flip = phi.copy()
+    flip[:, :, :8] = np.abs(flip[:, :, :8])  # cut nodes become tissue at the same |phi|
+    base, after = predict(wide, p, phi), predict(wide, p, flip)
+    plain = predict(model, p, flip) - predict(model, p, phi)
+    assert not np.allclose(after - base, plain)
+    # version 2 on disk for a mask model, version 1 still for a plain one; both load back
+    save_checkpoint(tmp_path / "wide.pt", wide, grid_shape=(9, 9, 17), spacing_m=(0.01,) * 3)
+    save_checkpoint(tmp_path / "plain.pt", model, grid_shape=(9, 9, 17), spacing_m=(0.01,) * 3)
+    assert torch.load(tmp_path / "wide.pt", weights_only=True)["format_version"] == 2
+    assert torch.load(tmp_path / "plain.pt", weights_only=True)["format_version"] == 1
+    loaded = load_checkpoint(tmp_path / "wide.pt").model
+    assert loaded.config.mask_input
+    np.testing.assert_array_equal(predict(loaded, p, phi), base)
+    assert not load_checkpoint(tmp_path / "plain.pt").model.config.mask_input
+
+
 @pytest.mark.parametrize("kernel", [1, 3])
 @pytest.mark.parametrize("channels_last", [False, True])
 def test_direct_onednn_conv_matches_the_reference(kernel: int, channels_last: bool) -> None:

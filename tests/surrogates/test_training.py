@@ -137,6 +137,33 @@ def test_init_from_starts_at_another_models_weights(tiny_dataset: Path, tmp_path
               init_from=base.checkpoint)  # fmt: skip
 
 
+def test_mask_input_fine_tune_starts_at_the_parent_and_learns(
+    tiny_dataset: Path, tmp_path: Path
+) -> None:
+    base = train(tiny_dataset, tmp_path / "base.pt", replace(FAST, epochs=2), progress=False)
+    masked = replace(FAST, mask_input=True)
+    zero = train(tiny_dataset, tmp_path / "zero.pt", replace(masked, epochs=0),
+                 init_from=base.checkpoint, progress=False)  # fmt: skip
+    parent, start = load_checkpoint(base.checkpoint).model, load_checkpoint(zero.checkpoint).model
+    assert start.config.mask_input and not parent.config.mask_input
+    p = 101325.0 + 1e4 * torch.rand(2, 9, 9, 17)
+    phi = 1e-2 * torch.randn(2, 9, 9, 17)
+    with torch.no_grad():
+        torch.testing.assert_close(
+            start.predict_displacement(p, phi), parent.predict_displacement(p, phi),
+            rtol=0, atol=0,
+        )  # fmt: skip
+    tuned = train(tiny_dataset, tmp_path / "tuned.pt", replace(masked, epochs=2),
+                  init_from=base.checkpoint, progress=False)  # fmt: skip
+    assert tuned.best_val_loss < base.best_val_loss
+    assert torch.any(load_checkpoint(tuned.checkpoint).model.stem.conv.weight[:, 2] != 0)
+    with pytest.raises(CheckpointError, match="--mask-input"):
+        train(tiny_dataset, tmp_path / "x.pt", FAST, init_from=tuned.checkpoint)
+    fresh = train(tiny_dataset, tmp_path / "fresh.pt", replace(masked, epochs=2), progress=False)
+    assert load_checkpoint(fresh.checkpoint).model.config.mask_input
+    assert fresh.history[-1]["val_loss"] < fresh.history[0]["val_loss"]
+
+
 def test_early_stopping(tiny_dataset: Path, tmp_path: Path) -> None:
     # a learning rate this large diverges, so validation stops improving at once
     result = train(

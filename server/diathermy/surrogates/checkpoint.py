@@ -18,7 +18,10 @@ from diathermy.surrogates.cnn import DisplacementCNN
 from diathermy.version import __version__
 
 FORMAT_NAME = "diathermy-cnn"
-FORMAT_VERSION = 1
+# 1: two input channels; 2: a model with the tissue-mask channel (``CNNConfig.mask_input``), which
+# a reader of version 1 cannot build. Models without the mask are still written as version 1.
+FORMAT_VERSION = 2
+READABLE_VERSIONS = (1, 2)
 _REQUIRED = ("constructor_args", "state_dict", "grid_shape", "spacing_m")
 
 
@@ -53,7 +56,7 @@ def save_checkpoint(
     """Write ``model`` (on any device) atomically to ``path``; grid (nz, ny, nx), spacing (dx, dy, dz) m."""
     payload: dict[str, Any] = {
         "format": FORMAT_NAME,
-        "format_version": FORMAT_VERSION,
+        "format_version": FORMAT_VERSION if model.config.mask_input else 1,
         "diathermy_version": __version__,
         "model": type(model).__name__,
         "constructor_args": model.constructor_args(),
@@ -86,10 +89,11 @@ def _read_payload(path: Path) -> dict[str, Any]:
     if not isinstance(payload, dict) or payload.get("format") != FORMAT_NAME:
         raise CheckpointError(f"{str(path)!r} is not a diathermy CNN checkpoint (foreign file)")
     version = payload.get("format_version")
-    if version != FORMAT_VERSION:
+    if version not in READABLE_VERSIONS:
+        readable = " and ".join(map(str, READABLE_VERSIONS))
         raise CheckpointError(
             f"{str(path)!r} has checkpoint format version {version!r}; this diathermy reads "
-            f"version {FORMAT_VERSION} (retrain or convert the model)"
+            f"versions {readable} (retrain or convert the model)"
         )
     missing = [k for k in _REQUIRED if k not in payload]
     if missing:

@@ -83,6 +83,7 @@ def train_config_from_args(args: argparse.Namespace) -> TrainConfig:
         lr_schedule=args.lr_schedule,
         energy_weight=args.energy_weight,
         scale_samples=args.scale_samples,
+        mask_input=args.mask_input,
     )
 
 
@@ -218,6 +219,11 @@ def add_train_parser(subparsers: Any) -> None:
     s.add_argument(
         "--scale-samples", type=_positive_int, default=256,
         help="training samples the normaliser is fitted on (256)",
+    )  # fmt: skip
+    s.add_argument(
+        "--mask-input", action="store_true",
+        help="also feed the tissue mask phi > 0 as an input channel; with --init from a model "
+        "without it, the new channel starts at zero weight (the parent's predictions)",
     )  # fmt: skip
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_train)

@@ -28,6 +28,10 @@ class CNNConfig:
     width: int = 16
     depth: int = 5
     negative_slope: float = 0.01
+    # a third input channel, the tissue mask H(phi): 1 at nodes with phi > 0, 0 in the cut. The
+    # stiffness jumps there (healthy E vs the ersatz ratio); phi alone, a smooth distance, makes
+    # the first layer learn a step from it.
+    mask_input: bool = False
 
     def __post_init__(self) -> None:
         if self.width < 1:
@@ -41,6 +45,9 @@ class CNNConfig:
 class DisplacementCNN(nn.Module):
     """Multi-scale 3D CNN; ``forward`` maps normalised (N, 2, D, H, W) to normalised (N, 3, D, H, W).
 
+    With ``config.mask_input`` the forward pass appends the mask phi > 0 as a third channel itself,
+    so every caller passes the same two normalised fields.
+
     Use :meth:`predict_displacement` for physical units (Pa, m in; m out).
     """
 
@@ -49,7 +56,7 @@ class DisplacementCNN(nn.Module):
         self.config = config or CNNConfig()
         w, slope = self.config.width, self.config.negative_slope
         self.normalizer = FieldNormalizer(scales or FieldScales())
-        self.stem = ConvAct(IN_CHANNELS, w, 3, slope)
+        self.stem = ConvAct(IN_CHANNELS + int(self.config.mask_input), w, 3, slope)
         self.trunk = nn.Sequential(*(ConvAct(w, w, 3, slope) for _ in range(self.config.depth - 1)))
         self.branch2 = PooledBranch(w, 2, slope)
         self.branch4 = PooledBranch(w, 4, slope)
@@ -58,6 +65,8 @@ class DisplacementCNN(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """(N, 2, D, H, W) normalised inputs -> (N, 3, D, H, W) normalised displacement."""
+        if self.config.mask_input:
+            x = torch.cat([x, (x[:, 1:2] > 0).to(x.dtype)], dim=1)  # phi's sign is unscaled
         h = self.stem(x)
         y = self.trunk(h) + self.branch2(h) + self.branch4(h)
         return conv3d_same(self.head(y), self.out.weight, self.out.bias)
@@ -86,6 +95,25 @@ class DisplacementCNN(nn.Module):
         from diathermy.surrogates.checkpoint import load_checkpoint
 
         return load_checkpoint(path, expected_grid=expected_grid).model
+
+    def with_mask_input(self) -> DisplacementCNN:
+        """A copy that also reads the tissue mask and computes exactly what this model does.
+
+        The new channel's stem weights start at zero (fine-tuning then learns them), every other
+        weight and the normaliser are copied. A model that already reads the mask is copied as is.
+        """
+        if self.config.mask_input:
+            wider = type(self).from_constructor_args(self.constructor_args())
+            wider.load_state_dict(self.state_dict())
+            return wider
+        args = self.constructor_args()
+        args["config"] = {**args["config"], "mask_input": True}
+        wider = type(self).from_constructor_args(args)
+        state = {k: v.clone() for k, v in self.state_dict().items()}
+        w = state["stem.conv.weight"]  # (width, 2, k, k, k)
+        state["stem.conv.weight"] = torch.cat([w, torch.zeros_like(w[:, :1])], dim=1)
+        wider.load_state_dict(state)
+        return wider.to(next(self.parameters()).device)
 
     def n_parameters(self) -> int:
         """Number of trainable scalars."""

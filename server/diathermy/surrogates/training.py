@@ -73,6 +73,7 @@ class TrainConfig:
     strain_weight: float = 1.0  # weight of the displacement-difference (strain) loss
     lr_schedule: str = "constant"  # "constant", or "cosine": lr decays to lr/100 over the epochs
     energy_weight: float = 0.0  # weight of the squared relative strain-energy error (eq. 20/21)
+    mask_input: bool = False  # the tissue mask phi > 0 as a third input channel
 
     def __post_init__(self) -> None:
         checks = {
@@ -94,7 +95,7 @@ class TrainConfig:
             raise CheckpointError(
                 f"lr_schedule must be one of {list(LR_SCHEDULES)}, got {self.lr_schedule!r}"
             )
-        CNNConfig(width=self.width, depth=self.depth)
+        CNNConfig(width=self.width, depth=self.depth, mask_input=self.mask_input)
 
 
 @dataclass(frozen=True)
@@ -259,6 +260,13 @@ def _start_state(
                 f"{str(init_from)!r} has per_sample_amplitude="
                 f"{model.normalizer.per_sample_amplitude}, the run asks for the other"
             )
+        if model.config.mask_input and not config.mask_input:
+            raise CheckpointError(
+                f"{str(init_from)!r} reads the tissue mask; the run asks for a model without it "
+                "(add --mask-input)"
+            )
+        if config.mask_input:
+            model = model.with_mask_input()  # a parent without the mask gains a zero channel
         return _Start(model, None, init_record(init_from, parent)), split
     p, phi, u = read_samples(
         info.path, _scale_indices(info.sample_indices(split[0]), config.scale_samples)
@@ -266,7 +274,7 @@ def _start_state(
     p0 = info.p0_pa
     torch.manual_seed(config.seed)
     model = DisplacementCNN(
-        CNNConfig(width=config.width, depth=config.depth),
+        CNNConfig(width=config.width, depth=config.depth, mask_input=config.mask_input),
         fit_scales(p, phi, u, p0_pa=p0, per_sample_amplitude=config.per_sample_amplitude),
     )
     return _Start(model, None, None), split
