@@ -208,6 +208,26 @@ def test_mask_channel_widening_keeps_the_prediction_and_the_mask_then_matters(
     assert not load_checkpoint(tmp_path / "plain.pt").model.config.mask_input
 
 
+def test_widening_keeps_the_prediction_and_breaks_the_copies_symmetry() -> None:
+    torch.manual_seed(1)
+    model = DisplacementCNN(CNNConfig(width=4, depth=3)).eval()
+    p, phi = _fields((9, 9, 17), seed=3)
+    ref = predict(model, p, phi)
+    exact = model.widened(7, noise=0.0).eval()
+    assert exact.config.width == 7 and exact.n_parameters() > model.n_parameters()
+    np.testing.assert_allclose(
+        predict(exact, p, phi), ref, rtol=1e-5, atol=1e-6 * np.abs(ref).max()
+    )
+    noisy = model.widened(7, noise=1e-3, seed=2).eval()
+    change = np.linalg.norm(predict(noisy, p, phi) - ref) / np.linalg.norm(ref)
+    assert 0 < change < 1e-2
+    w = noisy.trunk[0].conv.weight  # each copy differs from every old channel it could copy
+    assert all(not torch.equal(w[j], w[i]) for j in range(4, 7) for i in range(4))
+    assert model.widened(4, noise=0.0).n_parameters() == model.n_parameters()
+    with pytest.raises(ValueError, match="narrow"):
+        model.widened(3)
+
+
 @pytest.mark.parametrize("kernel", [1, 3])
 @pytest.mark.parametrize("channels_last", [False, True])
 def test_direct_onednn_conv_matches_the_reference(kernel: int, channels_last: bool) -> None:

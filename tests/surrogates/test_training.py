@@ -129,6 +129,12 @@ def test_init_from_starts_at_another_models_weights(tiny_dataset: Path, tmp_path
     assert load_checkpoint(again.checkpoint).data["init_from"] == chain  # a resume keeps it
     with pytest.raises(CheckpointError, match="width/depth"):
         train(tiny_dataset, tmp_path / "w.pt", replace(FAST, width=5), init_from=base.checkpoint)
+    with pytest.raises(CheckpointError, match="depth must match"):
+        train(tiny_dataset, tmp_path / "d.pt", replace(FAST, depth=4), init_from=base.checkpoint)
+    wide = train(tiny_dataset, tmp_path / "wide.pt", replace(FAST, width=9, epochs=1),
+                 init_from=base.checkpoint, progress=False)  # fmt: skip
+    assert load_checkpoint(wide.checkpoint).model.config.width == 9
+    assert wide.history[0]["val_loss"] < 1.05 * base.best_val_loss  # it starts where base ended
     with pytest.raises(CheckpointError, match="per_sample_amplitude"):
         train(tiny_dataset, tmp_path / "a.pt", replace(FAST, per_sample_amplitude=False),
               init_from=base.checkpoint)  # fmt: skip

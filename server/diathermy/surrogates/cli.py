@@ -194,7 +194,8 @@ def add_train_parser(subparsers: Any) -> None:
     s.add_argument(
         "--init", metavar="MODEL",
         help="start from this model's weights and normaliser (fine-tune on new data; fresh "
-        "optimizer and split; width and depth must match)",
+        "optimizer and split; the depth must match, a larger --width widens the model "
+        "function-preservingly)",
     )  # fmt: skip
     s.add_argument(
         "--lr-schedule", choices=["constant", "cosine"], default="constant",

@@ -115,6 +115,45 @@ class DisplacementCNN(nn.Module):
         wider.load_state_dict(state)
         return wider.to(next(self.parameters()).device)
 
+    def widened(self, width: int, *, noise: float = 1e-3, seed: int = 0) -> DisplacementCNN:
+        """A copy with ``width`` channels that computes what this model does (Net2WiderNet).
+
+        Every hidden representation (stem, trunk, branches, head) gets the same new channels,
+        each a copy of an old one chosen at random; a layer's incoming weights are copied from
+        the old channel and its weights from a channel that now has c copies are divided by c,
+        so every sum and every leaky ReLU sees what it saw before. The copies' incoming weights
+        get Gaussian noise of ``noise`` x that layer's weight RMS, which breaks the symmetry
+        that would otherwise keep a copy equal to its original through training (and changes
+        the output by about as much). A fine-tune then starts near this model's error with
+        twice the capacity instead of retraining from scratch.
+        """
+        old = self.config.width
+        if width < old:
+            raise ValueError(f"cannot narrow a width-{old} model to {width}")
+        gen = torch.Generator().manual_seed(seed)
+        source = torch.cat(
+            [torch.arange(old), torch.randint(0, old, (width - old,), generator=gen)]
+        )
+        copies = torch.bincount(source, minlength=old).to(torch.float32)
+        args = self.constructor_args()
+        args["config"] = {**args["config"], "width": width}
+        wide = type(self).from_constructor_args(args)
+        state = {k: v.detach().cpu().clone() for k, v in self.state_dict().items()}
+        for name, value in list(state.items()):
+            if not name.endswith(("weight", "bias")) or name.startswith("normalizer"):
+                continue
+            if name.endswith("weight") and not name.startswith("stem"):  # in: hidden channels
+                value = value[:, source] / copies[source].view(1, -1, *([1] * (value.dim() - 2)))
+            if not name.startswith("out."):  # out: hidden channels (the last layer keeps 3)
+                value = value[source].clone()
+                if name.endswith("weight") and width > old:
+                    rms = value[:old].pow(2).mean().sqrt()
+                    shape = value[old:].shape
+                    value[old:] += noise * rms * torch.randn(shape, generator=gen)
+            state[name] = value
+        wide.load_state_dict(state)
+        return wide.to(next(self.parameters()).device)
+
     def n_parameters(self) -> int:
         """Number of trainable scalars."""
         return sum(p.numel() for p in self.parameters() if p.requires_grad)

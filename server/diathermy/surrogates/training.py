@@ -250,10 +250,10 @@ def _start_state(
         parent = load_checkpoint(init_from, expected_grid=info.grid_shape)
         model = parent.model
         arch = (model.config.width, model.config.depth)
-        if arch != (config.width, config.depth):
+        if model.config.depth != config.depth or model.config.width > config.width:
             raise CheckpointError(
                 f"{str(init_from)!r} has width/depth {arch}, the run asks for "
-                f"{(config.width, config.depth)}"
+                f"{(config.width, config.depth)} (the depth must match; the width may grow)"
             )
         if model.normalizer.per_sample_amplitude != config.per_sample_amplitude:
             raise CheckpointError(
@@ -267,6 +267,8 @@ def _start_state(
             )
         if config.mask_input:
             model = model.with_mask_input()  # a parent without the mask gains a zero channel
+        if config.width > model.config.width:
+            model = model.widened(config.width, seed=config.seed)  # Net2WiderNet copies
         return _Start(model, None, init_record(init_from, parent)), split
     p, phi, u = read_samples(
         info.path, _scale_indices(info.sample_indices(split[0]), config.scale_samples)
