@@ -94,6 +94,7 @@ class TrainOptions(_Spec):
     strain_weight: Annotated[float, Field(ge=0, le=1e3, allow_inf_nan=False)] = 1.0
     lr_schedule: Literal["constant", "cosine"] = "constant"
     energy_weight: Annotated[float, Field(ge=0, le=1e3, allow_inf_nan=False)] = 0.0
+    mask_input: bool = False
 
 
 class TrainingJobSpec(_Spec):

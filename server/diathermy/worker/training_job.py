@@ -46,6 +46,8 @@ def torchrun_command(
     ]  # fmt: skip
     if not config.per_sample_amplitude:
         cmd.append("--global-amplitude")
+    if config.mask_input:
+        cmd.append("--mask-input")
     return cmd + (["--resume", str(resume)] if resume is not None else [])
 
 
