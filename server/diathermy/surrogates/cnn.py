@@ -125,7 +125,7 @@ class DisplacementCNN(nn.Module):
         get Gaussian noise of ``noise`` x that layer's weight RMS, which breaks the symmetry
         that would otherwise keep a copy equal to its original through training (and changes
         the output by about as much). A fine-tune then starts near this model's error with
-        twice the capacity instead of retraining from scratch.
+        more capacity instead of retraining from scratch.
         """
         old = self.config.width
         if width < old:
