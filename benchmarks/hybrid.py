@@ -5,12 +5,14 @@
                                 [--model PATH] [--guard-tol 0.005] [--jobs 2]
 
 Per scene (each in its own process, ``--jobs`` at a time):
-1. the FEM engine runs the scene; at every step whose mechanics ran, the CNN alone and the CNN
-   with its residual guard are evaluated on exactly that step's (p, phi, topology), and their
-   strain energy W is compared with the FEM's (``relative_strain_energy_error``): the surrogate
-   error, isolated from coupling;
-2. two fully coupled hybrid runs (CNN, CNN + guard) of the same scene; their drift is the same
-   error of W against the FEM run at the same step, plus the cut volumes.
+1. the FEM engine runs the scene; at every step whose mechanics ran, the CNN alone (raw and
+   Ritz-scaled), the CNN with its patch correction (the engine's default) and with patch and
+   residual guard are evaluated on exactly that step's (p, phi, topology), and their strain
+   energy W is compared with the FEM's (``relative_strain_energy_error``): the surrogate error,
+   isolated from coupling;
+2. three fully coupled hybrid runs (CNN, CNN + patch, CNN + patch + guard) of the same scene;
+   their drift is the same error of W against the FEM run at the same step, plus the cut
+   volumes.
 Times are measured in the same process: the mechanics effect of each run and whole steps; ratios
 FEM / hybrid are medians over the steps where mechanics ran. Writes benchmarks/results/hybrid.md,
 hybrid.png and hybrid.json.
@@ -65,9 +67,10 @@ def run_scene(name: Any, steps: int, model: str | None, guard_tol: float) -> dic
         poisson_ratio=t.poisson_ratio, p0_pa=t.p_atm_pa, ersatz_ratio=t.ersatz_stiffness_ratio
     )
     mesh, grads, tets = fem.disc.mesh, fem.disc.geom.grads, fem.disc.mesh.tets
-    raw = CNNBackend(mesh, model_path, ritz=False, **kw)
-    plain = CNNBackend(mesh, model_path, **kw)
-    guarded = CNNBackend(mesh, model_path, guard_tolerance=guard_tol, **kw)
+    raw = CNNBackend(mesh, model_path, ritz=False, correction="none", **kw)
+    plain = CNNBackend(mesh, model_path, correction="none", **kw)
+    patched = CNNBackend(mesh, model_path, correction="patch", **kw)
+    guarded = CNNBackend(mesh, model_path, guard_tolerance=guard_tol, correction="patch", **kw)
     rows: list[dict[str, Any]] = []
     fem_steps: list[dict[str, float]] = []
     fem_history: dict[int, dict[str, Any]] = {}
@@ -93,7 +96,9 @@ def run_scene(name: Any, steps: int, model: str | None, guard_tol: float) -> dic
             "max_pressure_pa": rep.max_pressure_pa,
             "cut_volume_m3": rep.cut_volume_m3,
         }
-        for label, backend in (("raw", raw), ("cnn", plain), ("guard", guarded)):
+        for label, backend in (
+            ("raw", raw), ("cnn", plain), ("patch", patched), ("guard", guarded)
+        ):  # fmt: skip
             t0 = time.perf_counter()
             out = backend.solve(
                 pressure_pa=p, level_set_m=phi, youngs_modulus_pa=E, healthy=healthy,
@@ -105,12 +110,18 @@ def run_scene(name: Any, steps: int, model: str | None, guard_tol: float) -> dic
             row[f"{label}_residual_before"] = out.extra["residual_before"]
             row[f"{label}_residual_after"] = out.extra["residual_after"]
             row[f"{label}_iterations"] = out.iterations
+            row[f"{label}_patch_nodes"] = out.extra["patch_nodes"]
         rows.append(row)
         fem_history[rep.step] = {"W": W_ref.copy(), "cut_volume_m3": rep.cut_volume_m3}
     # coupled runs: the hybrid drives its own cut; compare W with the FEM run step by step
     coupled = {}
-    for label, tol in (("cnn", None), ("guard", guard_tol)):
-        mech_cfg = {"backend": "cnn", "model": model_path, "guard_tolerance": tol}
+    for label, tol, correction in (
+        ("cnn", None, "none"), ("patch", None, "patch"), ("guard", guard_tol, "patch")
+    ):  # fmt: skip
+        mech_cfg = {
+            "backend": "cnn", "model": model_path, "guard_tolerance": tol,
+            "correction": correction,
+        }  # fmt: skip
         sim = Simulation(
             scene.model_copy(update={"mechanics": scene.mechanics.model_copy(update=mech_cfg)})
         )
@@ -163,6 +174,35 @@ def _full_step(part: dict[str, Any], label: str) -> float:
     return statistics.median(s) if s else float("nan")
 
 
+RUNS = {"cnn": "CNN", "patch": "CNN+patch", "guard": "CNN+patch+guard"}
+"""The coupled runs' labels in the report."""
+
+
+def _per_step_line(part: dict[str, Any]) -> str:
+    r = part["rows"]
+    if not r:
+        return f"| {part['scene']} | - | 0 |" + " |" * 13
+    t = np.array([x["time_s"] for x in r])
+
+    def err(label: str) -> np.ndarray:
+        return np.array([x[f"{label}_error"] for x in r])
+
+    re, ce, pe, ge = err("raw"), err("cnn"), err("patch"), err("guard")
+    nodes = np.array([x["patch_patch_nodes"] for x in r])
+    its = np.array([x["guard_iterations"] for x in r])
+    g = "x".join(map(str, part["grid"]))
+    return (
+        f"| {part['scene']} | {g} | {len(r)} | {max(x['max_pressure_pa'] for x in r) / 1e6:.2f} | "
+        f"{re.max():.3f} / {re.mean():.3f} | {ce.max():.3f} / {ce.mean():.3f} | "
+        f"{_slope_per_s(t, ce):+.4f} | **{pe.max():.4f}** / {pe.mean():.4f} | "
+        f"{_slope_per_s(t, pe):+.4f} | {int(np.median(nodes))} / {nodes.max()} | "
+        f"{ge.max():.4f} / {ge.mean():.4f} | {int((its > 0).sum())}/{len(r)} | "
+        f"{its[its > 0].mean() if (its > 0).any() else 0:.1f} | "
+        f"{statistics.median(x['cnn_residual_before'] for x in r):.3f} / "
+        f"{statistics.median(x['patch_residual_after'] for x in r):.3f} |"
+    )
+
+
 def write_report(parts: list[dict[str, Any]], out_dir: Path, wall_s: float) -> None:
     import matplotlib
 
@@ -175,7 +215,8 @@ def write_report(parts: list[dict[str, Any]], out_dir: Path, wall_s: float) -> N
         f"`python benchmarks/hybrid.py` on {platform.machine()}, "
         "2 shared cores (other jobs running: compare ratios, not absolute times). "
         f"Model `{Path(parts[0]['model']).name}`; guard tolerance {parts[0]['guard_tolerance']} "
-        "(relative equilibrium residual). Steps of 0.03 s per scene: "
+        "(relative equilibrium residual); patch: threshold 0.1, 2 rings (the scene defaults). "
+        "Steps of 0.03 s per scene: "
         + ", ".join(f"{p['scene']} {p['steps']}" for p in parts)
         + f" (the paper's: 400). Whole benchmark {wall_s / 60:.1f} min.",
         "",
@@ -183,36 +224,22 @@ def write_report(parts: list[dict[str, Any]], out_dir: Path, wall_s: float) -> N
         "error of hybrid-CNN 6.9 % (fixed electrode) and 9.6 % (moving electrode), no growth "
         "over time. Our target: <= 5 % without the guard, <= 1 % with it.",
         "",
-        "## Surrogate error per step (CNN evaluated on the FEM run's own p, phi and topology)",
+        "## Surrogate error per step (evaluated on the FEM run's own p, phi and topology)",
         "",
-        "Strain-energy error = `relative_strain_energy_error(W_cnn, W_fem)` over all tets. "
-        "raw CNN: the network's u as is; CNN: the shipped backend, u scaled by the energy-optimal "
-        "(Ritz) factor (u.f)/(u.Ku) from the residual's own mat-vec; CNN+guard: then Jacobi-CG "
-        "until the relative residual is below the tolerance. "
+        "Strain-energy error = `relative_strain_energy_error(W, W_fem)` over all tets, max / mean "
+        "over the steps. raw CNN: the network's u as is; CNN: u scaled by the energy-optimal "
+        "(Ritz) factor (u.f)/(u.Ku) from the residual's own mat-vec; **CNN+patch (the engine's "
+        "default)**: then equilibrium solved exactly (sparse LU) on the nodes whose residual force "
+        "is at least 0.1 x its peak plus 2 rings of neighbours, u held fixed outside; "
+        "CNN+patch+guard: then Jacobi-CG until the relative residual is below the tolerance. "
         "Slope: linear fit of error vs time (per simulated second); ~0 means no growth.",
         "",
-        "| scene | grid | mechanics steps | max p (MPa) | raw CNN max | raw CNN mean | CNN max | "
-        "CNN mean | CNN slope /s | CNN+guard max | CNN+guard mean | guard corrections | "
-        "mean CG its | residual before (median) |",
+        "| scene | grid | mechanics steps | max p (MPa) | raw CNN | CNN | CNN slope /s | "
+        "CNN+patch | CNN+patch slope /s | patch nodes (median / max) | CNN+patch+guard | "
+        "guard corrections | mean CG its | residual: CNN / after patch (median) |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for part in parts:
-        r = part["rows"]
-        if not r:
-            lines.append(f"| {part['scene']} | - | 0 | | | | | | | | | | | |")
-            continue
-        t = np.array([x["time_s"] for x in r])
-        ce = np.array([x["cnn_error"] for x in r])
-        ge = np.array([x["guard_error"] for x in r])
-        re = np.array([x["raw_error"] for x in r])
-        its = np.array([x["guard_iterations"] for x in r])
-        g = "x".join(map(str, part["grid"]))
-        lines.append(
-            f"| {part['scene']} | {g} | {len(r)} | {max(x['max_pressure_pa'] for x in r) / 1e6:.2f} | "
-            f"{re.max():.3f} | {re.mean():.3f} | {ce.max():.3f} | {ce.mean():.3f} | {_slope_per_s(t, ce):+.4f} | {ge.max():.4f} | "
-            f"{ge.mean():.4f} | {int((its > 0).sum())}/{len(r)} | {its[its > 0].mean() if (its > 0).any() else 0:.1f} | "
-            f"{statistics.median(x['cnn_residual_before'] for x in r):.3f} |"
-        )
+    lines += [_per_step_line(part) for part in parts]
     lines += [
         "",
         "## Coupled hybrid runs: drift against the FEM run",
@@ -230,7 +257,7 @@ def write_report(parts: list[dict[str, Any]], out_dir: Path, wall_s: float) -> N
             e = np.array([x["error"] for x in d])
             t = np.array([x["step"] for x in d]) * 0.03
             lines.append(
-                f"| {part['scene']} | {'CNN' if label == 'cnn' else 'CNN+guard'} | {e.max():.3f} | "
+                f"| {part['scene']} | {RUNS.get(label, label)} | {e.max():.3f} | "
                 f"{e.mean():.3f} | {_slope_per_s(t, e):+.4f} | {d[-1]['cut_volume_m3'] * 1e6:.4f} | "
                 f"{d[-1]['fem_cut_volume_m3'] * 1e6:.4f} |"
             )
@@ -238,25 +265,27 @@ def write_report(parts: list[dict[str, Any]], out_dir: Path, wall_s: float) -> N
         "",
         "## Cost per step (medians over steps whose mechanics ran; same process, same run)",
         "",
-        "| scene | grid | FEM mechanics (s) | CNN mechanics (s) | CNN+guard mechanics (s) | FEM / CNN | "
-        "FEM / CNN+guard | FEM full step (s) | hybrid full step (s) | hybrid+guard full step (s) | "
-        "FEM / hybrid (full) | FEM / hybrid+guard (full) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "Mechanics: the backend's solve on the FEM run's states. Full step: the coupled runs. "
+        "Ratios are FEM / hybrid.",
+        "",
+        "| scene | grid | FEM mechanics (s) | CNN | CNN+patch | CNN+patch+guard | FEM / CNN | "
+        "FEM / CNN+patch | FEM / CNN+patch+guard | FEM full step (s) | CNN full | CNN+patch full | "
+        "CNN+patch+guard full | FEM / CNN+patch (full) | FEM / CNN+patch+guard (full) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for part in parts:
         r = part["rows"]
         if not r:
             continue
         fm = statistics.median(x["fem_mech_s"] for x in r)
-        cm = statistics.median(x["cnn_s"] for x in r)
-        gm = statistics.median(x["guard_s"] for x in r)
+        cm, pm, gm = (statistics.median(x[f"{k}_s"] for x in r) for k in ("cnn", "patch", "guard"))
         fs = statistics.median(x["fem_step_s"] for x in r)
-
-        hc, hg = _full_step(part, "cnn"), _full_step(part, "guard")
+        hc, hp, hg = (_full_step(part, k) for k in ("cnn", "patch", "guard"))
         g = "x".join(map(str, part["grid"]))
         lines.append(
-            f"| {part['scene']} | {g} | {fm:.3f} | {cm:.3f} | {gm:.3f} | {fm / cm:.1f}x | {fm / gm:.1f}x | "
-            f"{fs:.3f} | {hc:.3f} | {hg:.3f} | {fs / hc:.1f}x | {fs / hg:.1f}x |"
+            f"| {part['scene']} | {g} | {fm:.3f} | {cm:.3f} | {pm:.3f} | {gm:.3f} | "
+            f"{fm / cm:.1f}x | {fm / pm:.1f}x | {fm / gm:.1f}x | {fs:.3f} | {hc:.3f} | {hp:.3f} | "
+            f"{hg:.3f} | {fs / hp:.1f}x | {fs / hg:.1f}x |"
         )
     lines += [
         "",
@@ -283,18 +312,21 @@ def write_report(parts: list[dict[str, Any]], out_dir: Path, wall_s: float) -> N
         t = np.array([x["time_s"] for x in r])
         for key, label, color in (
             ("raw_error", "raw CNN", "C1"),
-            ("cnn_error", "hybrid-CNN (Ritz-scaled)", "C0"),
-            ("guard_error", "CNN + guard", "C2"),
+            ("cnn_error", "CNN (Ritz-scaled)", "C0"),
+            ("patch_error", "CNN + patch (default)", "C4"),
+            ("guard_error", "CNN + patch + guard", "C2"),
         ):
-            e = np.array([x[key] for x in r]) * 100
+            e = np.maximum(np.array([x[key] for x in r]) * 100, 1e-4)  # log axis: floor 1e-6
             ax.plot(t, e, ".", color=color, alpha=0.35, ms=3)
             ma = _moving_average(e)
             ax.plot(t[len(t) - ma.size :], ma, "-", color=color, label=f"{label} (moving avg 10)")
-        d = part["coupled"]["cnn"]["drift"]
-        if d:
-            ax.plot([x["step"] * 0.03 for x in d], [x["error"] * 100 for x in d], "--", color="C3",
-                    lw=1, label="coupled hybrid-CNN drift")  # fmt: skip
+        for label, style in (("cnn", "--"), ("patch", ":")):
+            d = part["coupled"].get(label, {}).get("drift", [])
+            if d:
+                ax.plot([x["step"] * 0.03 for x in d], [x["error"] * 100 for x in d], style,
+                        color="C3", lw=1, label=f"coupled {RUNS[label]} drift")  # fmt: skip
         ax.axhline(5, color="k", lw=0.6, ls=":")
+        ax.axhline(1, color="k", lw=0.4, ls=":")
         ax.set_title(f"{part['scene']} ({'x'.join(map(str, part['grid']))})")
         ax.set_xlabel("time (s)")
         ax.set_ylabel("strain-energy error (%)")

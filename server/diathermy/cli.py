@@ -67,6 +67,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         data["mechanics"]["model"] = args.model
     if args.guard is not None:
         data["mechanics"]["guard_tolerance"] = args.guard
+    if args.correction is not None:
+        data["mechanics"]["correction"] = args.correction
     scene = scene_from_dict(data)
     summary = run_scene(
         scene,
@@ -128,6 +130,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="mechanics.guard_tolerance: cnn corrects predictions whose relative residual exceeds "
         "it (5e-3 recommended: benchmarks/results/hybrid.md); pgd enriches a mode when its "
         "estimated strain-energy error does",
+    )  # fmt: skip
+    s.add_argument(
+        "--correction", choices=["none", "patch"],
+        help="mechanics.correction for --mechanics cnn: 'patch' (default) re-solves equilibrium "
+        "where the prediction's residual concentrates; 'none' keeps the network's u",
     )  # fmt: skip
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_simulate)

@@ -41,7 +41,9 @@ def test_hybrid_benchmark_runs_a_tiny_scene_and_writes_its_report(tmp_path: Path
     for row in part["rows"]:
         assert row["guard_error"] <= row["raw_error"] + 1e-12  # the guard only ever helps
         assert row["guard_residual_after"] <= 1e-3
+        assert row["patch_patch_nodes"] > 0 and row["cnn_patch_nodes"] == 0
+    assert set(part["coupled"]) == {"cnn", "patch", "guard"}
     bench.write_report([part], tmp_path, wall_s=1.0)
     report = (tmp_path / "hybrid.md").read_text()
-    assert scene.name in report and "| CNN+guard |" in report
+    assert scene.name in report and "| CNN+patch+guard |" in report
     assert (tmp_path / "hybrid.png").stat().st_size > 0

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from diathermy.fem.geometry import structured_geometry
 from diathermy.mesh import Grid, build_tet_mesh
@@ -149,3 +152,129 @@ def test_ritz_scale_recovers_the_amplitude_and_never_increases_the_energy_error(
         assert energy_error(a * v) <= energy_error(v) * (1 + 1e-12)
     zero = np.zeros_like(u)
     assert ritz_scale(f, zero, zero, free) == 1.0
+
+
+def _local_error(mesh, u: np.ndarray, free: np.ndarray, radius_m: float) -> np.ndarray:  # noqa: ANN001
+    """u with a 40 % error on the nodes within ``radius_m`` of the pressure peak (a bad crater)."""
+    near = np.linalg.norm(mesh.points - np.array([0.01, 0.005, 0.01]), axis=1) < radius_m
+    u0 = u.copy()
+    u0[near] *= 1.4
+    u0[near] += 1e-7
+    u0[~free] = 0.0
+    return u0
+
+
+def test_patch_correction_removes_an_error_inside_the_patch_exactly(problem) -> None:  # noqa: ANN001
+    from diathermy.fem.elastic import eigenstress_load
+    from diathermy.physics.equilibrium_guard import node_graph, patch_correct, residual_patch
+
+    mesh, geom, E, healthy, p, solver, u, free = problem
+    K = solver.assembler.stiffness(E, NU)
+    f = eigenstress_load(geom, mesh.tets, mesh.n_nodes, p - P0, healthy)
+    u0 = _local_error(mesh, u, free, 0.003)
+    Ku0 = (K @ u0.ravel()).reshape(-1, 3)
+    r = np.where(free, f - Ku0, 0.0)
+    # the residual of an error e is -K e: it lives on e's nodes and one ring around them, so
+    # every node with a residual, plus a ring, holds all of e
+    nodes = residual_patch(r, node_graph(K), threshold=1e-9, layers=1, max_nodes=mesh.n_nodes)
+    assert 0 < nodes.size < mesh.n_nodes
+    c = patch_correct(K, f, u0, Ku0, free, nodes)
+    assert c.nodes == nodes.size and c.residual_before > 0.1
+    np.testing.assert_allclose(c.u, u, rtol=0, atol=1e-9 * abs(u).max())
+    assert c.residual_after < 1e-8
+    np.testing.assert_allclose(c.Ku, (K @ c.u.ravel()).reshape(-1, 3), atol=1e-12 * abs(f).max())
+    outside = np.setdiff1d(np.arange(mesh.n_nodes), nodes)
+    assert np.array_equal(c.u[outside], u0[outside]) and np.all(c.u[~free] == 0.0)
+
+
+def test_patch_correction_of_a_wider_error_solves_its_patch_and_cuts_the_energy_error(
+    problem,  # noqa: ANN001
+) -> None:
+    from diathermy.fem.elastic import eigenstress_load
+    from diathermy.physics.equilibrium_guard import node_graph, patch_correct, residual_patch
+
+    mesh, geom, E, healthy, p, solver, u, free = problem
+    K = solver.assembler.stiffness(E, NU)
+    f = eigenstress_load(geom, mesh.tets, mesh.n_nodes, p - P0, healthy)
+    u0 = _local_error(mesh, u, free, 0.006)
+    Ku0 = (K @ u0.ravel()).reshape(-1, 3)
+    nodes = residual_patch(
+        np.where(free, f - Ku0, 0.0), node_graph(K), threshold=0.1, layers=1, max_nodes=150
+    )
+    assert 0 < nodes.size <= 150
+    c = patch_correct(K, f, u0, Ku0, free, nodes)
+    # equilibrium holds exactly on the patch's free DOFs, and the global residual falls
+    on_patch = np.zeros(mesh.n_nodes, bool)
+    on_patch[nodes] = True
+    r_after = np.where(free, f - (K @ c.u.ravel()).reshape(-1, 3), 0.0)
+    assert np.abs(r_after[on_patch]).max() < 1e-9 * np.abs(f).max()
+    assert c.residual_after < 0.5 * c.residual_before
+    W_ref = strain_energy_density(geom.grads, mesh.tets, u, E, NU)
+
+    def err(v: np.ndarray) -> float:
+        return relative_strain_energy_error(
+            strain_energy_density(geom.grads, mesh.tets, v, E, NU), W_ref
+        )
+
+    assert err(c.u) < 0.5 * err(u0)
+
+
+def test_an_empty_patch_changes_nothing(problem) -> None:  # noqa: ANN001
+    from diathermy.physics.equilibrium_guard import node_graph, patch_correct, residual_patch
+
+    mesh, _, E, _, _, solver, u, free = problem
+    K = solver.assembler.stiffness(E, NU)
+    zero = np.zeros_like(u)
+    assert residual_patch(zero, node_graph(K), threshold=0.1, layers=2, max_nodes=10).size == 0
+    c = patch_correct(K, zero, u, (K @ u.ravel()).reshape(-1, 3), free, np.zeros(0, np.int64))
+    assert c.nodes == 0 and c.u is u
+
+
+def test_residual_patch_grows_rings_and_respects_its_cap(problem) -> None:  # noqa: ANN001
+    from diathermy.physics.equilibrium_guard import node_graph, residual_patch
+
+    mesh, _, E, _, _, solver, _, _ = problem
+    graph = node_graph(solver.assembler.stiffness(E, NU))
+    r = np.zeros((mesh.n_nodes, 3))
+    r[100, 1] = 2.0
+    r[7, 0] = 1.0  # half the peak
+    assert residual_patch(r, graph, threshold=0.6, layers=0, max_nodes=99).tolist() == [100]
+    assert residual_patch(r, graph, threshold=0.4, layers=0, max_nodes=99).tolist() == [7, 100]
+    ring = residual_patch(r, graph, threshold=0.6, layers=1, max_nodes=99)
+    assert set(ring) == set(graph[100].indices) and 100 in ring  # the node and its neighbours
+    capped = residual_patch(r, graph, threshold=0.4, layers=1, max_nodes=ring.size)
+    assert np.array_equal(capped, ring)  # too big with both seeds: the stronger one stays
+    for bad in ({"threshold": 0.0}, {"threshold": 1.5}, {"layers": -1}, {"max_nodes": 0}):
+        kw = {"threshold": 0.1, "layers": 1, "max_nodes": 10, **bad}
+        with pytest.raises(ValueError, match="patch"):
+            residual_patch(r, graph, **kw)  # type: ignore[arg-type]
+
+
+def _grid_graph(n: int) -> sp.csr_matrix:
+    """A path of n nodes (each its own neighbour, as a stiffness pattern has it)."""
+    return sp.diags([1, 1, 1], [-1, 0, 1], shape=(n, n), format="csr", dtype=np.int8)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    values=st.lists(st.floats(0.0, 1e6, allow_subnormal=False), min_size=1, max_size=60),
+    threshold=st.floats(1e-6, 1.0),
+    layers=st.integers(0, 4),
+    max_nodes=st.integers(1, 80),
+)
+def test_residual_patch_properties(values, threshold, layers, max_nodes) -> None:  # noqa: ANN001
+    from diathermy.physics.equilibrium_guard import residual_patch
+
+    n = len(values)
+    r = np.zeros((n, 3))
+    r[:, 2] = values
+    patch = residual_patch(
+        r, _grid_graph(n), threshold=threshold, layers=layers, max_nodes=max_nodes
+    )
+    if max(values) == 0.0:
+        assert patch.size == 0
+        return
+    assert np.array_equal(patch, np.unique(patch))  # sorted, no repeats
+    assert int(np.argmax(values)) in patch or values.count(max(values)) > 1
+    # within the cap, unless one seed's rings alone exceed it
+    assert patch.size <= max(max_nodes, 2 * layers + 1)

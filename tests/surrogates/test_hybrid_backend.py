@@ -38,7 +38,9 @@ def fitted(sample: FemSample, tmp_path_factory: pytest.TempPathFactory) -> Path:
     return overfit_model(sample, tmp_path_factory.mktemp("hybrid") / "fitted.pt")
 
 
-def _backend(path: Path, sample: FemSample, tol: float | None, pre: str = "jacobi") -> CNNBackend:
+def _backend(
+    path: Path, sample: FemSample, tol: float | None, pre: str = "jacobi", correction: str = "none"
+) -> CNNBackend:
     return CNNBackend(
         sample.mesh,
         path,
@@ -47,6 +49,7 @@ def _backend(path: Path, sample: FemSample, tol: float | None, pre: str = "jacob
         ersatz_ratio=1e-6,
         guard_tolerance=tol,
         guard_preconditioner=pre,  # type: ignore[arg-type]
+        correction=correction,  # type: ignore[arg-type]
     )
 
 
@@ -98,6 +101,39 @@ def test_guard_brings_the_residual_under_tolerance_and_the_energy_error_down(
     assert _step(amg, sample).rebuilt is False and amg.n_builds == 1
     again = _step(backend, sample)  # Jacobi-CG on the kept stiffness: no solver is ever built
     assert again.rebuilt is False and backend.n_builds == 0 and backend.n_corrections == 2
+
+
+def test_patch_correction_cuts_the_energy_error_where_the_residual_is(
+    sample: FemSample, fitted: Path, tmp_path: Path
+) -> None:
+    for path in (fitted, untrained_model(tmp_path / "u.pt")):
+        plain = _step(_backend(path, sample, None), sample)
+        patched = _step(_backend(path, sample, None, correction="patch"), sample)
+        assert plain.extra["patch_nodes"] == 0 and plain.extra["correction"] == "none"
+        assert 0 < patched.extra["patch_nodes"] < sample.mesh.n_nodes
+        assert patched.extra["residual_before"] == pytest.approx(plain.residual)
+        assert patched.residual == patched.extra["residual_after"] < plain.residual
+        assert _se_error(sample, patched.u) < 0.5 * _se_error(sample, plain.u)
+        assert np.all(patched.u[sample.mesh.side_nodes("z-")] == 0.0)
+    # the guard finishes from the patched u
+    guarded = _step(_backend(fitted, sample, 1e-3, correction="patch"), sample)
+    assert guarded.extra["corrected"] is True and guarded.extra["residual_after"] <= 1e-3
+
+
+@pytest.mark.parametrize(
+    ("kw", "field"),
+    [
+        ({"correction": "global"}, "mechanics.correction"),
+        ({"patch_threshold": 0.0}, "mechanics.patch_threshold"),
+        ({"patch_threshold": 2.0}, "mechanics.patch_threshold"),
+        ({"patch_layers": -1}, "mechanics.patch_layers"),
+    ],
+)
+def test_bad_patch_settings_are_refused(
+    sample: FemSample, fitted: Path, kw: dict[str, object], field: str
+) -> None:
+    with pytest.raises(SceneError, match=field):
+        CNNBackend(sample.mesh, fitted, poisson_ratio=NU, p0_pa=P0, ersatz_ratio=1e-6, **kw)  # type: ignore[arg-type]
 
 
 def test_model_for_another_grid_or_corrupt_file_is_refused(

@@ -711,6 +711,9 @@ def make_backend(sim: Simulation) -> MechanicsBackend:
             p0_pa=sim.tissue.p_atm_pa,
             ersatz_ratio=sim.tissue.ersatz_stiffness_ratio,
             guard_tolerance=cfg.guard_tolerance,
+            correction=cfg.correction,
+            patch_threshold=cfg.patch_threshold,
+            patch_layers=cfg.patch_layers,
         )
     if cfg.backend == "pgd":
         return _pgd_backend(sim)

@@ -52,6 +52,7 @@ class Row:
     failed: str | None = None
     model: str | None = None
     guard_tolerance: float | None = None
+    correction: str = "none"  # cnn: "patch" or "none" (fem and pgd: "none")
     compared_steps: int = 0  # steps where the reference had strain energy to compare against
 
     @property
@@ -135,6 +136,7 @@ def _row(
             failed=rec.error,
             model=rec.variant.model,
             guard_tolerance=rec.variant.guard_tolerance,
+            correction=rec.variant.correction,
         ), np.array([])
     step = np.asarray(rec.step_s)
     mech = np.asarray(rec.effect_s.get("mechanics", [0.0]))
@@ -169,6 +171,7 @@ def _row(
         error_grows=bool(slope * span > 0.5 * mean) if mean > 0 else False,
         model=rec.variant.model,
         guard_tolerance=rec.variant.guard_tolerance,
+        correction=rec.variant.correction,
         compared_steps=int(active.sum()),
     ), se
 

@@ -75,6 +75,7 @@ def resolve_accuracy_budget(scene: Scene, report_path: str | Path | None = None)
     data = scene.model_dump()
     data["mechanics"].update(
         backend=row["backend"], rtol=row["rtol"], guard_tolerance=row.get("guard_tolerance"),
+        correction=row.get("correction", "none"),  # reports before the patch: the network's u
         model=row.get("model") if row.get("model") and Path(row["model"]).exists() else None,
     )  # fmt: skip
     data["accuracy_budget"] = None  # resolved: the chosen variant is now explicit

@@ -25,6 +25,7 @@ class Variant:
     model: str | None = None
     guard_tolerance: float | None = None
     coupling: Literal["staggered", "monolithic"] = "staggered"
+    correction: Literal["none", "patch"] = "none"  # cnn only: the network's u, or patched
 
     def apply(self, scene: Scene, steps: int) -> Scene:
         """The scene as this variant runs it."""
@@ -39,6 +40,7 @@ class Variant:
             "rtol": self.rtol,
             "model": self.model,
             "guard_tolerance": self.guard_tolerance,
+            "correction": self.correction,
         }
         return scene_from_dict(data)
 
@@ -68,8 +70,9 @@ def default_variants(models: dict[str, str] | None = None) -> list[Variant]:
     """FEM at four tolerances, monolithic coupling and a coarser grid, plus the surrogates given.
 
     ``models`` maps variant names to model files, e.g. {"cnn-w16": "model.pt", "pgd-15": "pgd.npz"};
-    a name starting with "cnn" runs the CNN backend (also with the guard), "pgd" the PGD one
-    (also with online enrichment at an estimated strain-energy error of 10 %).
+    a name starting with "cnn" runs the CNN backend: the network alone, with the patch
+    correction, and with the patch and the guard at two tolerances; "pgd" the PGD one (also
+    with online enrichment at an estimated strain-energy error of 10 %).
     """
     out = [
         Variant("fem-rtol1e-2", rtol=1e-2),
@@ -82,12 +85,14 @@ def default_variants(models: dict[str, str] | None = None) -> list[Variant]:
     for name, path in (models or {}).items():
         if name.startswith("cnn"):
             out.append(Variant(name, backend="cnn", model=path))
-            out.append(
-                Variant(f"{name}+guard1e-2", backend="cnn", model=path, guard_tolerance=1e-2)
-            )
-            out.append(
-                Variant(f"{name}+guard1e-4", backend="cnn", model=path, guard_tolerance=1e-4)
-            )
+            out.append(Variant(f"{name}+patch", backend="cnn", model=path, correction="patch"))
+            for tol, label in ((1e-2, "1e-2"), (1e-4, "1e-4")):
+                out.append(
+                    Variant(
+                        f"{name}+patch+guard{label}", backend="cnn", model=path,
+                        guard_tolerance=tol, correction="patch",
+                    )
+                )  # fmt: skip
         elif name.startswith("pgd"):
             out.append(Variant(name, backend="pgd", model=path))
             out.append(  # online enrichment when the strain-energy indicator exceeds 10 %

@@ -126,6 +126,18 @@ class MechanicsConfig(_Model):
         description="cnn: relative equilibrium residual above which the prediction is corrected "
         "by CG; pgd: estimated strain-energy error above which a mode is enriched online",
     )
+    correction: Literal["none", "patch"] = Field(
+        "patch",
+        description="cnn: 'patch' solves equilibrium exactly on the nodes where the prediction's "
+        "residual concentrates (the crater wall), the prediction held fixed around them; 'none' "
+        "keeps the network's displacement. fem and pgd ignore it",
+    )
+    patch_threshold: Annotated[float, Field(gt=0, le=1)] = Field(
+        0.1, description="cnn patch: seed nodes whose residual force exceeds this x its peak"
+    )
+    patch_layers: Annotated[int, Field(ge=0, le=8)] = Field(
+        2, description="cnn patch: rings of neighbouring nodes added around the seeds"
+    )
 
 
 class LevelSetConfig(_Model):
