@@ -278,3 +278,21 @@ def test_residual_patch_properties(values, threshold, layers, max_nodes) -> None
     assert int(np.argmax(values)) in patch or values.count(max(values)) > 1
     # within the cap, unless one seed's rings alone exceed it
     assert patch.size <= max(max_nodes, 2 * layers + 1)
+
+
+def test_a_singular_patch_leaves_u_unchanged(problem) -> None:  # noqa: ANN001
+    from diathermy.fem.elastic import eigenstress_load
+    from diathermy.physics.equilibrium_guard import node_graph, patch_correct, residual_patch
+
+    mesh, geom, E, healthy, p, solver, u, free = problem
+    E0 = np.where(healthy, E, 0.0)  # removed tissue with no stiffness at all: K_PP singular
+    K = solver.assembler.stiffness(E0, NU)
+    f = eigenstress_load(geom, mesh.tets, mesh.n_nodes, p - P0, healthy)
+    u0 = _local_error(mesh, u, free, 0.02)  # the whole top: the patch takes in the void
+    Ku0 = (K @ u0.ravel()).reshape(-1, 3)
+    nodes = residual_patch(
+        np.where(free, f - Ku0, 0.0), node_graph(K), threshold=1e-12, layers=3, max_nodes=10**6
+    )
+    c = patch_correct(K, f, u0, Ku0, free, nodes)
+    assert nodes.size == mesh.n_nodes  # the fixture's loose bits float free: K_PP is singular
+    assert c.nodes == 0 and c.u is u0 and c.residual_after == c.residual_before
