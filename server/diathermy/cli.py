@@ -127,8 +127,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--model", help="surrogate model file for --mechanics cnn|pgd")
     s.add_argument(
         "--guard", type=float, metavar="TOL",
-        help="mechanics.guard_tolerance: cnn corrects predictions whose relative residual exceeds "
-        "it (5e-3 recommended: benchmarks/results/hybrid.md); pgd enriches a mode when its "
+        help="mechanics.guard_tolerance: cnn continues with CG while the relative residual "
+        "exceeds it (the patch alone stays within 1 %% strain energy on the benchmark scenes, "
+        "5e-3 takes it to ~0.1 %%: benchmarks/results/hybrid.md); pgd enriches a mode when its "
         "estimated strain-energy error does",
     )  # fmt: skip
     s.add_argument(

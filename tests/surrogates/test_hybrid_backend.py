@@ -209,3 +209,42 @@ def test_shipped_default_model_loads_for_the_default_grid() -> None:
     assert path.stat().st_size < 1_000_000
     metrics = json.loads(path.with_suffix(".json").read_text())
     assert 0 <= metrics["validation"]["mean_strain_energy_error"] < 1.0
+
+
+def test_engine_patch_correction_is_the_default_and_the_scene_can_turn_it_off(
+    fitted: Path,
+) -> None:
+    steps = 9
+    fem = Simulation(tiny_scene(steps=steps))
+    fem.run(steps)
+    errors, modes = {}, {}
+    for correction in ("patch", "none"):
+        mech_cfg: dict[str, object] = {"backend": "cnn", "model": str(fitted)}
+        if correction == "none":
+            mech_cfg["correction"] = "none"
+        sim = Simulation(tiny_scene(steps=steps, mechanics=mech_cfg))
+        reports = sim.run(steps)
+        mech = [r.effects["mechanics"] for r in reports if r.ran("mechanics")]
+        assert len(mech) >= 2
+        modes[correction] = {m.extra["correction"] for m in mech}
+        nodes = [m.extra["patch_nodes"] for m in mech]
+        assert all(n > 0 for n in nodes) if correction == "patch" else nodes == [0] * len(nodes)
+        errors[correction] = relative_strain_energy_error(
+            sim.state["strain_energy"], fem.state["strain_energy"]
+        )
+    assert modes == {"patch": {"patch"}, "none": {"none"}}
+    assert errors["patch"] < 0.5 * errors["none"]
+
+
+def test_cli_correction_flag_reaches_the_run_file(fitted: Path, tmp_path: Path) -> None:
+    import h5py
+
+    scene = tmp_path / "tiny.json"
+    scene.write_text(tiny_scene().model_dump_json())
+    out = tmp_path / "run.h5"
+    argv = ["simulate", str(scene), "--mechanics", "cnn", "--model", str(fitted)]
+    assert main([*argv, "--correction", "none", "--out", str(out), "--steps", "9", "--quiet"]) == 0
+    with h5py.File(out, "r") as f:
+        reports = [json.loads(r) for r in f["reports"][...]]
+    mech = [r["effects"]["mechanics"] for r in reports if r["effects"]["mechanics"]["ran"]]
+    assert mech and all(m["extra"]["correction"] == "none" for m in mech)
