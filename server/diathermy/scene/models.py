@@ -133,7 +133,7 @@ class MechanicsConfig(_Model):
         "keeps the network's displacement. fem and pgd ignore it",
     )
     patch_threshold: Annotated[float, Field(gt=0, le=1)] = Field(
-        0.1, description="cnn patch: seed nodes whose residual force exceeds this x its peak"
+        0.1, description="cnn patch: seed nodes whose residual force reaches this x its peak"
     )
     patch_layers: Annotated[int, Field(ge=0, le=8)] = Field(
         2, description="cnn patch: rings of neighbouring nodes added around the seeds"

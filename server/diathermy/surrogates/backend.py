@@ -82,7 +82,7 @@ class CNNBackend:
         ritz: scale the prediction by the energy-optimal factor (u.f)/(u.K u) (``ritz_scale``),
             free given the residual's mat-vec; the network fixes the shape, FEM the amplitude.
         correction: "patch" (default) re-solves equilibrium on the nodes whose residual force
-            exceeds ``patch_threshold`` x its peak, grown by ``patch_layers`` rings of
+            reaches ``patch_threshold`` x its peak, grown by ``patch_layers`` rings of
             neighbours (at most ``patch_max_nodes``), u held fixed outside; "none" keeps the
             network's u (Ritz-scaled).
     """
@@ -114,11 +114,10 @@ class CNNBackend:
             raise SceneError(f"mechanics.correction: 'none' or 'patch', got {correction!r}")
         if not 0.0 < patch_threshold <= 1.0:
             raise SceneError(f"mechanics.patch_threshold: must be in (0, 1], got {patch_threshold}")
-        if patch_layers < 0 or patch_max_nodes < 1:
-            raise SceneError(
-                f"mechanics.patch_layers: must be >= 0 (got {patch_layers}), and the patch "
-                f"must allow at least one node (got {patch_max_nodes})"
-            )
+        if patch_layers < 0:
+            raise SceneError(f"mechanics.patch_layers: must be >= 0, got {patch_layers}")
+        if patch_max_nodes < 1:
+            raise SceneError(f"patch_max_nodes: must be >= 1, got {patch_max_nodes}")
         self.mesh = mesh
         self.model_path = Path(model_path)
         self.device = torch.device(device) if device is not None else default_device()
