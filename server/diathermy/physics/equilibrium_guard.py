@@ -293,7 +293,7 @@ def residual_patch(
         mask = np.zeros(norm.size, dtype=bool)
         mask[seeds] = True
         for _ in range(layers):
-            mask |= (graph @ mask.astype(np.int8)) > 0
+            mask |= (graph @ mask.astype(np.int32)) > 0  # int32: no overflow of counts
         if mask.sum() <= max_nodes or seeds.size == 1:
             return np.flatnonzero(mask)
         seeds = seeds[: max(1, seeds.size // 2)]
