@@ -218,6 +218,12 @@ def test_patch_correction_of_a_wider_error_solves_its_patch_and_cuts_the_energy_
 
     assert err(c.u) < 0.5 * err(u0)
 
+    def energy_norm(v: np.ndarray) -> float:  # ||u* - v||_K^2, the error a Galerkin step lowers
+        e = (u - v).ravel()
+        return float(e @ (K @ e))
+
+    assert energy_norm(c.u) < energy_norm(u0)
+
 
 def test_an_empty_patch_changes_nothing(problem) -> None:  # noqa: ANN001
     from diathermy.physics.equilibrium_guard import node_graph, patch_correct, residual_patch
