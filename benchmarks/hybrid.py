@@ -69,8 +69,13 @@ def run_scene(name: Any, steps: int, model: str | None, guard_tol: float) -> dic
     mesh, grads, tets = fem.disc.mesh, fem.disc.geom.grads, fem.disc.mesh.tets
     raw = CNNBackend(mesh, model_path, ritz=False, correction="none", **kw)
     plain = CNNBackend(mesh, model_path, correction="none", **kw)
-    patched = CNNBackend(mesh, model_path, correction="patch", **kw)
-    guarded = CNNBackend(mesh, model_path, guard_tolerance=guard_tol, correction="patch", **kw)
+    patch_kw = dict(
+        correction="patch",
+        patch_threshold=scene.mechanics.patch_threshold,
+        patch_layers=scene.mechanics.patch_layers,
+    )  # fmt: skip  (the scene's, i.e. the engine's defaults)
+    patched = CNNBackend(mesh, model_path, **patch_kw, **kw)
+    guarded = CNNBackend(mesh, model_path, guard_tolerance=guard_tol, **patch_kw, **kw)
     rows: list[dict[str, Any]] = []
     fem_steps: list[dict[str, float]] = []
     fem_history: dict[int, dict[str, Any]] = {}
@@ -150,6 +155,8 @@ def run_scene(name: Any, steps: int, model: str | None, guard_tol: float) -> dic
         "steps": steps,
         "model": model_path,
         "guard_tolerance": guard_tol,
+        "patch_threshold": scene.mechanics.patch_threshold,
+        "patch_layers": scene.mechanics.patch_layers,
         "rows": rows,
         "fem_steps": fem_steps,
         "coupled": coupled,
@@ -206,16 +213,23 @@ def _per_step_line(part: dict[str, Any]) -> str:
 def write_report(parts: list[dict[str, Any]], out_dir: Path, wall_s: float) -> None:
     import matplotlib
 
+    from diathermy.scene.models import MechanicsConfig
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    default = MechanicsConfig()  # runs before these were recorded used the scene defaults
+    patch = (
+        parts[0].get("patch_threshold", default.patch_threshold),
+        parts[0].get("patch_layers", default.patch_layers),
+    )
     lines = [
         "# Hybrid-CNN against FEM (held-out built-in scenes)",
         "",
         f"`python benchmarks/hybrid.py` on {platform.machine()}, "
         "2 shared cores (other jobs running: compare ratios, not absolute times). "
         f"Model `{Path(parts[0]['model']).name}`; guard tolerance {parts[0]['guard_tolerance']} "
-        "(relative equilibrium residual); patch: threshold 0.1, 2 rings (the scene defaults). "
+        f"(relative equilibrium residual); patch: threshold {patch[0]}, {patch[1]} rings. "
         "Steps of 0.03 s per scene: "
         + ", ".join(f"{p['scene']} {p['steps']}" for p in parts)
         + f" (the paper's: 400). Whole benchmark {wall_s / 60:.1f} min.",
@@ -230,7 +244,8 @@ def write_report(parts: list[dict[str, Any]], out_dir: Path, wall_s: float) -> N
         "over the steps. raw CNN: the network's u as is; CNN: u scaled by the energy-optimal "
         "(Ritz) factor (u.f)/(u.Ku) from the residual's own mat-vec; **CNN+patch (the engine's "
         "default)**: then equilibrium solved exactly (sparse LU) on the nodes whose residual force "
-        "is at least 0.1 x its peak plus 2 rings of neighbours, u held fixed outside; "
+        f"is at least {patch[0]} x its peak plus {patch[1]} rings of neighbours, u held fixed "
+        "outside; "
         "CNN+patch+guard: then Jacobi-CG until the relative residual is below the tolerance. "
         "Slope: linear fit of error vs time (per simulated second); ~0 means no growth.",
         "",
