@@ -138,3 +138,19 @@ def test_published_scene_schema_is_fresh():
 
     path = Path(__file__).resolve().parents[2] / "openapi" / "scene.schema.json"
     assert json.loads(path.read_text()) == scene_json_schema(), "regenerate with diathermy schema"
+
+
+@pytest.mark.parametrize(
+    ("mechanics", "field"),
+    [
+        ({"correction": "global"}, "mechanics.correction"),
+        ({"patch_threshold": 0}, "mechanics.patch_threshold"),
+        ({"patch_threshold": 1.5}, "mechanics.patch_threshold"),
+        ({"patch_layers": -1}, "mechanics.patch_layers"),
+        ({"patch_layers": 9}, "mechanics.patch_layers"),
+    ],
+)
+def test_bad_patch_settings_name_their_field(mechanics, field):
+    with pytest.raises(SceneError, match=field):
+        scene_from_dict({"mechanics": {"backend": "cnn", **mechanics}})
+    assert scene_from_dict({"mechanics": {"backend": "cnn"}}).mechanics.correction == "patch"

@@ -127,6 +127,7 @@ def test_patch_correction_cuts_the_energy_error_where_the_residual_is(
         ({"patch_threshold": 0.0}, "mechanics.patch_threshold"),
         ({"patch_threshold": 2.0}, "mechanics.patch_threshold"),
         ({"patch_layers": -1}, "mechanics.patch_layers"),
+        ({"patch_max_nodes": 0}, "patch_max_nodes"),
     ],
 )
 def test_bad_patch_settings_are_refused(
