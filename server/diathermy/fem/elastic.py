@@ -48,7 +48,9 @@ class ElasticAssembler:
 
     On a uniform Kuhn mesh (``shape_id`` given) every element matrix is E_e K_ref[shape_e], so the
     BSR data is one sparse product ``gather @ K_ref``: ``gather`` (n_blocks, 6*16) holds E of the
-    tet that puts combination (shape, a, b) into each block. Elsewhere it is 9 bincounts of the
+    tet that puts combination (shape, a, b) into each block. On a graded Kuhn mesh a tet of cell
+    (hx, hy, hz) has K_e = E_e sum_m F_m(e) R_m[shape_e] over the 6 factors |T| / (h_p h_q), p <= q
+    (``cell_factors``), so the data is 6 such products. Elsewhere it is 9 bincounts of the
     element matrices over the pattern's slots (memory 16x9 floats per tet: small meshes only).
     """
 
@@ -58,6 +60,8 @@ class ElasticAssembler:
     gather: sp.csr_matrix | None = None
     gather_tet: np.ndarray | None = None  # tet of each stored entry of ``gather``
     reference_tets: np.ndarray | None = None  # (6,) one tet of each Kuhn shape
+    cell_factors: np.ndarray | None = None  # (n_tets, 6) |T| / (h_p h_q) on a graded mesh
+    unit_grads: np.ndarray | None = None  # (6, 4, 3) reference gradients on the unit cube
 
     def stiffness(self, youngs_modulus: np.ndarray | float, nu: float) -> sp.bsr_matrix:
         """Stiffness matrix (3 n_nodes, 3 n_nodes) as BSR 3x3 blocks; E per tet in Pa."""
@@ -68,8 +72,17 @@ class ElasticAssembler:
             ref = self.reference_tets
             g = ElementGeometry(self.geom.grads[ref], self.geom.volumes[ref])
             K_ref = elastic_local(g, 1.0, nu).reshape(ref.size * 16, 9)
-            np.take(E, self.gather_tet, out=self.gather.data)
-            data = self.gather @ K_ref
+            if self.cell_factors is None:
+                np.take(E, self.gather_tet, out=self.gather.data)
+                data = self.gather @ K_ref
+            else:
+                assert self.unit_grads is not None
+                R = graded_reference(self.unit_grads, nu)
+                data = np.zeros((self.pattern.nnz, 9))
+                for m in range(6):
+                    f = E * self.cell_factors[:, m]
+                    np.take(f, self.gather_tet, out=self.gather.data)
+                    data += self.gather @ R[m]
         else:
             K = elastic_local(self.geom, E, nu).reshape(n_tets * 16, 9)
             slot = self.pattern.slot.ravel()
@@ -87,8 +100,9 @@ def elastic_assembler(
 ) -> ElasticAssembler:
     """Precompute the assembly of ``pattern``; pass the mesh's ``shape_id`` on a Kuhn mesh.
 
-    With ``shape_id`` the tets of one shape must be translates of each other (``TetMesh``
-    guarantees it), since their element matrices are taken from one reference tet.
+    With ``shape_id`` the tets must be the Kuhn tets of a structured grid (``TetMesh``
+    guarantees it): on a uniform grid their element matrices are taken from one reference tet
+    per shape, on a graded grid they are scaled from unit-cube references per cell.
     """
     if shape_id is None:
         return ElasticAssembler(pattern, geom)
@@ -115,7 +129,39 @@ def elastic_assembler(
     gather_tet = np.concatenate(tet_of).astype(index_type)[csr.data]
     gather = sp.csr_matrix((np.zeros(csr.nnz), csr.indices, csr.indptr), shape=csr.shape)
     reference_tets = order[starts[:-1]]
-    return ElasticAssembler(pattern, geom, sid, gather, gather_tet, reference_tets)
+    box = 1.0 / np.abs(geom.grads).max(axis=1)  # (n_tets, 3) cell sizes of the Kuhn tets
+    ref_box = box[reference_tets][np.searchsorted(shapes, sid)]
+    if np.all(np.abs(box - ref_box) <= 1e-9 * ref_box):  # uniform grid
+        return ElasticAssembler(pattern, geom, sid, gather, gather_tet, reference_tets)
+    factors = np.column_stack([geom.volumes / (box[:, p] * box[:, q]) for p, q in _FACTOR_PAIRS])
+    unit = np.rint(geom.grads[reference_tets] * box[reference_tets][:, None, :])
+    return ElasticAssembler(pattern, geom, sid, gather, gather_tet, reference_tets, factors, unit)
+
+
+_FACTOR_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+_FACTOR_OF = np.array([[0, 3, 4], [3, 1, 5], [4, 5, 2]])  # factor index of axis pair (p, q)
+
+
+def graded_reference(unit_grads: np.ndarray, nu: float) -> np.ndarray:
+    """Reference matrices R (6, n_ref * 16, 9) of the graded Kuhn stiffness at E = 1.
+
+    With unit-cube gradients u (n_ref, 4, 3), a tet of cell h has g = u / h, so
+    |T| (lambda g_ai g_bj + mu g_aj g_bi) = F_(ij) (lambda u_ai u_bj + mu u_aj u_bi) and
+    |T| mu delta_ij g_a . g_b = mu delta_ij sum_k F_(kk) u_ak u_bk, with F_(pq) = |T| / (h_p h_q).
+    """
+    lam, mu = lame_parameters(1.0, nu)
+    u = unit_grads
+    n_ref = u.shape[0]
+    R = np.zeros((6, n_ref, 4, 4, 3, 3))
+    for i in range(3):
+        for j in range(3):
+            R[_FACTOR_OF[i, j], ..., i, j] += lam * np.einsum("ea,eb->eab", u[..., i], u[..., j])
+            R[_FACTOR_OF[i, j], ..., i, j] += mu * np.einsum("ea,eb->eab", u[..., j], u[..., i])
+    for k in range(3):
+        uu = mu * np.einsum("ea,eb->eab", u[..., k], u[..., k])
+        for i in range(3):
+            R[_FACTOR_OF[k, k], ..., i, i] += uu
+    return R.reshape(6, n_ref * 16, 9)
 
 
 def eigenstress_load(

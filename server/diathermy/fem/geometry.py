@@ -37,15 +37,32 @@ def nodal_volumes(geom: ElementGeometry, tets: np.ndarray, n_nodes: int) -> np.n
     return np.bincount(tets.ravel(), np.repeat(geom.volumes / 4.0, 4), minlength=n_nodes)
 
 
+def kuhn_boxes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """Cell size (n_tets, 3) as (hx, hy, hz) in m of each Kuhn tet's hexahedral cell.
+
+    Vertex 0 of a Kuhn tet is the cell's corner 000 and the far corner 111 is vertex 2 or 3
+    (``mesh.tet_mesh.kuhn_corners``), so the cell is their componentwise largest offset.
+    """
+    p0 = points[tets[:, 0]]
+    return np.maximum(points[tets[:, 2]] - p0, points[tets[:, 3]] - p0)
+
+
 def structured_geometry(
     points: np.ndarray, tets: np.ndarray, shape_id: np.ndarray
 ) -> ElementGeometry:
-    """Geometry of a uniform Kuhn mesh: every tet is a translate of one of 6 reference tets.
+    """Geometry of a Kuhn mesh (uniform or graded) without per-tet 3x3 inverses.
 
-    Computes the 6 reference tets once and gathers them by ``shape_id`` (n_tets,); equal to
+    Uniform grid: every tet is a translate of one of 6 reference tets; their geometry is
+    computed once and gathered by ``shape_id`` (n_tets,). Graded grid: a Kuhn tet of a cell
+    (hx, hy, hz) is the unit-cube tet scaled per axis, so its gradients are the unit ones
+    (entries 0, +-1) divided by (hx, hy, hz) and its volume hx hy hz / 6. Equal to
     ``element_geometry`` on such meshes, several times faster on large grids.
     """
     first = np.array([np.flatnonzero(shape_id == s)[0] for s in range(6)])
-    ref = element_geometry(points, tets[first])
     sid = shape_id.astype(np.intp)
-    return ElementGeometry(grads=ref.grads[sid], volumes=ref.volumes[sid])
+    box = kuhn_boxes(points, tets)
+    ref = element_geometry(points, tets[first])
+    if np.all(np.abs(box - box[first][sid]) <= 1e-9 * box[first][sid]):  # uniform
+        return ElementGeometry(grads=ref.grads[sid], volumes=ref.volumes[sid])
+    unit = np.rint(ref.grads * box[first][:, None, :])  # (6, 4, 3) gradients on the unit cube
+    return ElementGeometry(grads=unit[sid] / box[:, None, :], volumes=box.prod(axis=1) / 6.0)

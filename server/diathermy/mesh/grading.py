@@ -1,0 +1,115 @@
+"""Node coordinates of one axis graded geometrically around a working interval.
+
+Inside the working interval [a, b] the cells are uniform, at most ``fine`` long; away from it
+they grow by at most ``growth`` per cell (capped at ``max_cell``) until the block's end. Used by
+``Grid.graded`` to put resolution under the electrode and keep the far field coarse.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from diathermy.errors import MeshError
+
+MAX_AXIS_NODES = 4096
+"""Most nodes one graded axis may get (a guard against a fine spacing that would exhaust memory)."""
+
+MAX_GROWTH = 2.0
+"""Largest growth ratio of adjacent cells accepted (P1 accuracy degrades beyond it)."""
+
+
+def _check_length(name: str, value: float) -> float:
+    v = float(value)
+    if not math.isfinite(v) or v <= 0.0:
+        raise MeshError(f"{name} must be a positive finite length in m, got {value!r}")
+    return v
+
+
+def _outer_cells(gap: float, first: float, growth: float, max_cell: float) -> np.ndarray:
+    """Cell lengths (m,) filling ``gap`` outward from a cell of length ``first``.
+
+    The cells grow by one ratio q in [1, growth] (capped at ``max_cell``) chosen so they add up to
+    ``gap`` exactly; a gap too short for growth gets equal cells no longer than ``first``.
+    """
+    if gap <= 0.0:
+        return np.zeros(0)
+
+    def cells(q: float, m: int) -> np.ndarray:
+        return np.minimum(first * q ** np.arange(1, m + 1, dtype=float), max(max_cell, first))
+
+    # fewest cells that reach the gap at the largest allowed growth
+    total, m, c = 0.0, 0, first
+    while total < gap:
+        m += 1
+        c = min(c * growth, max(max_cell, first))
+        total += c
+        if m > MAX_AXIS_NODES:
+            raise MeshError(
+                f"grading needs more than {MAX_AXIS_NODES} cells to fill {gap} m from "
+                f"{first} m cells: coarsen the fine spacing or raise the growth ratio"
+            )
+    if m * first >= gap:
+        return np.full(m, gap / m)
+    lo, hi = 1.0, growth
+    for _ in range(100):  # bisection: the sum grows with q
+        mid = 0.5 * (lo + hi)
+        if cells(mid, m).sum() < gap:
+            lo = mid
+        else:
+            hi = mid
+    out = cells(hi, m)
+    return out * (gap / out.sum())
+
+
+def graded_axis(
+    lo: float,
+    hi: float,
+    region: tuple[float, float],
+    fine: float,
+    growth: float,
+    max_cell: float = math.inf,
+) -> np.ndarray:
+    """Node coordinates (n,) from lo to hi, uniform (<= fine) on ``region``, geometric outside.
+
+    ``region`` (a, b) with a <= b is clipped to [lo, hi]; a region shorter than one fine cell
+    (e.g. a point) becomes the fine cell centred on it. A gap shorter than one fine cell between the region and the
+    block's end joins the region, so no sliver cell is left at the boundary.
+    """
+    if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+        raise MeshError(f"axis bounds must be finite with hi > lo, got ({lo}, {hi})")
+    a, b = (float(region[0]), float(region[1]))
+    if not (math.isfinite(a) and math.isfinite(b)) or a > b:
+        raise MeshError(f"working region must be a finite interval (lo <= hi), got {region}")
+    if b < lo or a > hi:
+        raise MeshError(f"working region {region} lies outside the block's axis [{lo}, {hi}]")
+    fine = _check_length("fine spacing", fine)
+    if not (math.isfinite(growth) and 1.0 <= growth <= MAX_GROWTH):
+        raise MeshError(f"growth ratio must lie in [1, {MAX_GROWTH}], got {growth!r}")
+    if not (max_cell >= fine):
+        raise MeshError(f"largest cell ({max_cell!r} m) must be at least the fine spacing {fine} m")
+    if b - a < fine:
+        a, b = 0.5 * (a + b) - 0.5 * fine, 0.5 * (a + b) + 0.5 * fine
+    a, b = max(a, lo), min(b, hi)
+    if a - lo < fine:
+        a = lo
+    if hi - b < fine:
+        b = hi
+    n_region = max(1, math.ceil((b - a) / fine * (1.0 - 1e-12)))
+    if n_region + 1 > MAX_AXIS_NODES:
+        raise MeshError(
+            f"a fine spacing of {fine} m over {b - a} m needs {n_region + 1} nodes on one axis "
+            f"(at most {MAX_AXIS_NODES})"
+        )
+    h = (b - a) / n_region
+    left = _outer_cells(a - lo, h, growth, max_cell)[::-1]
+    right = _outer_cells(hi - b, h, growth, max_cell)
+    cells = np.concatenate([left, np.full(n_region, h), right])
+    if cells.size + 1 > MAX_AXIS_NODES:
+        raise MeshError(f"graded axis needs {cells.size + 1} nodes (at most {MAX_AXIS_NODES})")
+    x = lo + np.concatenate([[0.0], np.cumsum(cells)])
+    x[-1] = hi
+    if np.any(np.diff(x) <= 0.0):
+        raise MeshError(f"graded axis on [{lo}, {hi}] collapsed a cell (fine spacing {fine} m)")
+    return x

@@ -1,0 +1,163 @@
+"""Graded grids: geometric grading around a working box, explicit spacing semantics, bad input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from diathermy.errors import MeshError
+from diathermy.fem.geometry import element_geometry
+from diathermy.mesh import Grid, build_tet_mesh
+from diathermy.mesh.grading import MAX_AXIS_NODES, graded_axis
+
+
+def small_graded() -> Grid:
+    return Grid.graded(
+        (0.012, 0.004, 0.006), (0.016, 0.006, 0.01), 1e-3, growth=1.5, size_m=(0.03, 0.01, 0.01)
+    )
+
+
+def test_graded_grid_is_fine_in_the_box_and_grows_outside():
+    g = small_graded()
+    x, y, z = g.axes()
+    dx, dy, dz = g.cell_sizes_m()
+    inside = (x[:-1] >= 0.012 - 1e-12) & (x[1:] <= 0.016 + 1e-12)
+    assert inside.sum() == 4 and np.allclose(dx[inside], 1e-3)
+    for d in (dx, dy, dz):
+        ratio = d[1:] / d[:-1]
+        assert np.all(ratio <= 1.5 + 1e-9) and np.all(ratio >= 1 / 1.5 - 1e-9)
+    assert z[-1] == 0.01 and dz[-1] == pytest.approx(1e-3)  # box reaches the top: fine there
+    assert x[0] == 0.0 and x[-1] == 0.03 and not g.is_uniform
+    assert g.min_spacing_m == pytest.approx((1e-3, 1e-3, 1e-3))
+
+
+def test_graded_tet_mesh_fills_the_block_and_locates_points(rng):
+    g = small_graded()
+    mesh = build_tet_mesh(g)
+    geom = element_geometry(mesh.points, mesh.tets)
+    assert np.all(geom.volumes > 0)
+    assert geom.volumes.sum() == pytest.approx(0.03 * 0.01 * 0.01, rel=1e-12)
+    xyz = rng.random((300, 3)) * np.asarray(g.size_m)
+    tet, lam = mesh.locate(xyz)
+    assert np.all(lam >= -1e-12)
+    back = np.einsum("na,nak->nk", lam, mesh.points[mesh.tets[tet]])
+    assert np.allclose(back, xyz)
+
+
+def test_spacing_is_explicit_uniform_only():
+    u = Grid((5, 6, 7), size_m=(0.03, 0.02, 0.01))
+    assert u.is_uniform and u.min_spacing_m == u.spacing_m
+    assert np.array_equal(u.cell_sizes_m()[0], np.full(6, 0.005))
+    with pytest.raises(MeshError, match="no single node spacing"):
+        _ = small_graded().spacing_m
+
+
+def test_graded_axes_equal_to_linspace_reproduce_the_uniform_mesh():
+    u = Grid((5, 6, 7), size_m=(0.03, 0.02, 0.01), origin_m=(0.1, -0.2, 0.0))
+    g = Grid.from_axes(*u.axes())
+    assert np.array_equal(build_tet_mesh(g).points, build_tet_mesh(u).points)
+    xyz = np.array([[0.111, -0.191, 0.0041], [0.129, -0.181, 0.0099]])
+    assert all(np.array_equal(a, b) for a, b in zip(g.cell_of(xyz), u.cell_of(xyz), strict=True))
+
+
+def test_region_point_and_whole_block():
+    x = graded_axis(0.0, 0.1, (0.05, 0.05), 0.002, 1.3)
+    i = np.searchsorted(x, 0.05) - 1
+    assert x[i + 1] - x[i] == pytest.approx(0.002) and np.diff(x).min() == pytest.approx(0.002)
+    assert x[i] + x[i + 1] == pytest.approx(0.1)
+    whole = graded_axis(0.0, 0.1, (0.0, 0.1), 0.01, 1.3)
+    assert np.allclose(whole, np.linspace(0.0, 0.1, 11))
+
+
+def test_max_cell_caps_the_far_field():
+    x = graded_axis(0.0, 0.2, (0.0, 0.01), 1e-3, 1.5, max_cell=5e-3)
+    assert np.diff(x).max() <= 5e-3 * (1 + 1e-9)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"fine_m": 0.0}, "fine spacing"),
+        ({"fine_m": math.nan}, "fine_m"),
+        ({"growth": 0.9}, "growth ratio"),
+        ({"growth": 3.0}, "growth ratio"),
+        ({"fine_m": 1e-7}, "nodes on one axis"),
+        ({"region_lo_m": (0.5, 0.0, 0.0), "region_hi_m": (0.6, 0.1, 0.1)}, "outside"),
+        ({"region_lo_m": (0.1, 0.0, 0.0), "region_hi_m": (0.05, 0.1, 0.1)}, "lo <= hi"),
+        ({"max_cell_m": 1e-4}, "largest cell"),
+        ({"region_lo_m": (0.0, 0.0)}, "region_lo_m"),
+        ({"size_m": (0.2, -0.1, 0.1)}, "block size"),
+        ({"origin_m": (0.0, math.inf, 0.0)}, "origin"),
+    ],
+)
+def test_bad_grading_rejected(kwargs, match):
+    args = {"region_lo_m": (0.09, 0.04, 0.09), "region_hi_m": (0.11, 0.06, 0.1), "fine_m": 1e-3}
+    args.update(kwargs)
+    lo, hi, fine = args.pop("region_lo_m"), args.pop("region_hi_m"), args.pop("fine_m")
+    with pytest.raises(MeshError, match=match):
+        Grid.graded(lo, hi, fine, **args)
+
+
+@pytest.mark.parametrize(
+    ("axes", "match"),
+    [
+        (([0.0, 0.1], [0.0, 0.1], [0.0, 0.1, 0.1]), "strictly increasing"),
+        (([0.0, 0.1], [0.0, 0.1], [0.0]), ">= 2"),
+        (([0.0, math.nan], [0.0, 0.1], [0.0, 0.1]), "finite"),
+    ],
+)
+def test_bad_axes_rejected(axes, match):
+    with pytest.raises(MeshError, match=match):
+        Grid.from_axes(*axes)
+
+
+def test_axes_must_match_shape_and_box():
+    with pytest.raises(MeshError, match="must be 3 numbers"):
+        Grid((2, 2, 3), size_m=(1, 1, 1), node_axes_m=((0, 0.5, 0.7, 1), (0, 1), (0, 1)))
+    with pytest.raises(MeshError, match="run from the origin"):
+        Grid((2, 2, 3), size_m=(1, 1, 1), node_axes_m=((0, 0.5, 0.9), (0, 1), (0, 1)))
+
+
+@given(
+    lo=st.floats(-1.0, 1.0),
+    length=st.floats(1e-3, 1.0),
+    a=st.floats(-0.5, 1.5),
+    width=st.floats(0.0, 1.0),
+    fine=st.floats(1e-4, 2.0),
+    growth=st.floats(1.0, 2.0),
+)
+def test_graded_axis_properties_or_clear_error(lo, length, a, width, fine, growth):
+    """Any input gives a valid increasing axis from lo to hi, or a MeshError; never garbage."""
+    hi = lo + length
+    region = (lo + a * length, lo + (a + width) * length)
+    try:
+        x = graded_axis(lo, hi, region, fine * length, growth)
+    except MeshError:
+        return
+    d = np.diff(x)
+    assert x[0] == lo and x[-1] == hi and np.all(d > 0) and x.size <= MAX_AXIS_NODES
+    assert d.min() <= fine * length * (1 + 1e-9)
+    # adjacent cells differ by at most the growth ratio (a factor 2 more where a short gap
+    # gets equal cells shorter than the fine ones)
+    r = d[1:] / d[:-1]
+    assert np.all(r <= 2 * growth * (1 + 1e-6)) and np.all(r >= 1 / (2 * growth * (1 + 1e-6)))
+
+
+@given(
+    values=st.lists(
+        st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-5, 5)),
+        min_size=0,
+        max_size=4,
+    )
+)
+def test_graded_grid_bad_inputs_raise_mesh_error(values):
+    """Random region/fine vectors either build a grid or raise MeshError, nothing else."""
+    try:
+        g = Grid.graded(values, (0.2, 0.1, 0.1), values[0] if values else 1e-3)
+    except MeshError:
+        return
+    assert g.n_nodes >= 8 and all(np.all(np.diff(a) > 0) for a in g.axes())
