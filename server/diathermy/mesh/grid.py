@@ -17,6 +17,7 @@ from diathermy.errors import MeshError
 from diathermy.mesh.grading import graded_axis
 
 Axes = tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]
+AxisLike = Sequence[float] | np.ndarray
 
 
 @dataclass(frozen=True)
@@ -72,7 +73,7 @@ class Grid:
         return (out[0], out[1], out[2])
 
     @classmethod
-    def from_axes(cls, x: Sequence[float], y: Sequence[float], z: Sequence[float]) -> Grid:
+    def from_axes(cls, x: AxisLike, y: AxisLike, z: AxisLike) -> Grid:
         """A graded grid with node coordinates x (nx,), y (ny,), z (nz,) in m, each increasing."""
         axes = [np.asarray(a, dtype=float) for a in (x, y, z)]
         for name, a in zip("xyz", axes, strict=True):
