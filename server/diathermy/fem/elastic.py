@@ -78,11 +78,14 @@ class ElasticAssembler:
             else:
                 assert self.unit_grads is not None
                 R = graded_reference(self.unit_grads, nu)
-                data = np.zeros((self.pattern.nnz, 9))
-                for m in range(6):
-                    f = E * self.cell_factors[:, m]
-                    np.take(f, self.gather_tet, out=self.gather.data)
-                    data += self.gather @ R[m]
+                by_component = np.zeros((9, self.pattern.nnz))
+                for m in range(6):  # factor m feeds 3 (diagonal) or 2 (off-diagonal) components
+                    cols = np.flatnonzero(np.any(R[m] != 0.0, axis=0))
+                    self.gather.data[:] = (E * self.cell_factors[:, m])[self.gather_tet]
+                    part = self.gather @ R[m][:, cols]
+                    for i, c in enumerate(cols):
+                        by_component[c] += part[:, i]
+                data = by_component.T
         else:
             K = elastic_local(self.geom, E, nu).reshape(n_tets * 16, 9)
             slot = self.pattern.slot.ravel()
