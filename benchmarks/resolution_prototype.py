@@ -1,7 +1,7 @@
 """Resolution under the electrode (issue #21): delivered power and electric-solve cost of uniform
 grids against graded tensor-product grids, side by side in one run.
 
-    python benchmarks/resolution_prototype.py [--uniform-nz 17 33 49 65] [--fine-mm 1 0.5 0.25]
+    python benchmarks/resolution_prototype.py [--uniform-nz 17 33 49 65] [--fine-mm 1 0.5 ...]
 
 The paper's block (0.2 x 0.1 x 0.1 m, sigma 0.33 S/m), the current-density drive (5.72e4 A/m^2
 over a 1.17 mm disk, I = 0.246 A) at the centre of the top face. Uniform grids (nz, nz, 2 nz - 1);
@@ -100,7 +100,7 @@ def graded(fine_mm: float, box, args) -> Grid:  # noqa: ANN001
 def main(argv: list[str] | None = None) -> Path:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--uniform-nz", type=int, nargs="*", default=[17, 33, 49, 65])
-    ap.add_argument("--fine-mm", type=float, nargs="*", default=[1.0, 0.5, 0.25])
+    ap.add_argument("--fine-mm", type=float, nargs="*", default=[1.0, 0.5, 0.35, 0.25, 0.125])
     ap.add_argument("--margin-mm", type=float, default=3.0)
     ap.add_argument("--growth", type=float, default=1.25)
     ap.add_argument("--max-cell-mm", type=float, default=6.25)
@@ -129,6 +129,27 @@ def main(argv: list[str] | None = None) -> Path:
         counts.append((fine, gf.shape, gf.n_nodes, gm.shape, gm.n_nodes))
     write_report(args, rows, counts, current, (p_eq, p_flux, p_ref, r_block))
     return args.out
+
+
+def convergence_lines(rows: list[dict], p_ref: float) -> list[str]:
+    """Observed order of P over graded rows whose finest cells halve, and the extrapolated limit."""
+    graded = sorted((r for r in rows if r["grid"].startswith("graded")), key=lambda r: -r["h_mm"])
+    chain = [graded[0]] if graded else []
+    for r in graded[1:]:
+        if abs(chain[-1]["h_mm"] / r["h_mm"] - 2.0) < 1e-6:
+            chain.append(r)
+    if len(chain) < 3:
+        return []
+    p = [r["power_w"] for r in chain]
+    orders = [np.log2((p[i] - p[i - 1]) / (p[i + 1] - p[i])) for i in range(1, len(p) - 1)]
+    limit = p[-1] + (p[-1] - p[-2]) / (2.0 ** orders[-1] - 1.0)
+    hs = " / ".join(f"{r['h_mm']:g}" for r in chain)
+    return [
+        "",
+        f"Graded cells halving ({hs} mm): observed order of P "
+        + ", ".join(f"{o:.2f}" for o in orders)
+        + f"; Richardson limit {limit:.2f} W = {limit / p_ref:.3f} x the reference.",
+    ]
 
 
 def write_report(args, rows, counts, current, refs) -> None:  # noqa: ANN001
@@ -169,6 +190,7 @@ def write_report(args, rows, counts, current, refs) -> None:  # noqa: ANN001
             f"| {r['solve_s']:.2f} | {r['amg_setup_s']:.2f} | {r['cg_s']:.2f} "
             f"| {r['iterations']} | {mib:.0f} |"
         )
+    lines += convergence_lines(rows, p_ref)
     lines += [
         "",
         "Node counts of graded grids (same growth and cap) over the two working regions: the fixed"

@@ -70,7 +70,7 @@ def test_tilted_plane_exact_at_the_front_and_converging_away():
 
 def test_sphere_converges_first_order_and_second_near_the_front():
     """|x - c| - R from phi = tanh(3 (|x - c| - R)): global max error O(h) (measured 0.90, 0.91),
-    the band |d| < 2h O(h^2)-like (measured 1.47, 1.61)."""
+    the band |d| < 2h O(h^2)-like (measured 1.46, 1.61)."""
     e_max, e_band, hs = [], [], []
     for level in (0, 1, 2):
         axes, xyz, h = graded_nodes(level)
