@@ -60,9 +60,12 @@ def structured_geometry(
     """
     first = np.array([np.flatnonzero(shape_id == s)[0] for s in range(6)])
     sid = shape_id.astype(np.intp)
-    box = kuhn_boxes(points, tets)
     ref = element_geometry(points, tets[first])
-    if np.all(np.abs(box - box[first][sid]) <= 1e-9 * box[first][sid]):  # uniform
+    one_per_cell = tets[shape_id == 0]  # every cell has one tet of each shape
+    cells = kuhn_boxes(points, one_per_cell)
+    ref_box = kuhn_boxes(points, tets[first])
+    if np.all(np.abs(cells - ref_box[0]) <= 1e-9 * ref_box[0]):  # uniform grid
         return ElementGeometry(grads=ref.grads[sid], volumes=ref.volumes[sid])
-    unit = np.rint(ref.grads * box[first][:, None, :])  # (6, 4, 3) gradients on the unit cube
+    box = kuhn_boxes(points, tets)
+    unit = np.rint(ref.grads * ref_box[:, None, :])  # (6, 4, 3) gradients on the unit cube
     return ElementGeometry(grads=unit[sid] / box[:, None, :], volumes=box.prod(axis=1) / 6.0)

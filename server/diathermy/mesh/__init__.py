@@ -1,4 +1,4 @@
-"""Structured grids of nodes and their conforming 6-tetrahedra-per-cell meshes."""
+"""Structured grids of nodes (uniform or graded) and their conforming 6-tetrahedra-per-cell meshes."""
 
 from diathermy.mesh.grid import Grid
 from diathermy.mesh.tet_mesh import SIDES, TetMesh, barycentric, build_tet_mesh

@@ -42,7 +42,8 @@ class TetMesh:
         grid: the node grid.
         points: node coordinates (n_nodes, 3) in m.
         tets: node indices (n_tets, 4); tet ``6 * cell + s`` is Kuhn shape ``s`` of ``cell``.
-        shape_id: Kuhn shape (n_tets,) in 0..5; tets of one shape are translates of each other.
+        shape_id: Kuhn shape (n_tets,) in 0..5; tets of one shape are translates of each other
+            on a uniform grid, and scaled per axis by their cell's size on a graded one.
         neighbours: face neighbour (n_tets, 4) across the face opposite each vertex, -1 on the boundary.
         boundary_faces: per side, triangles (n_faces, 3) of node indices.
     """
