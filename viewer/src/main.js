@@ -1,0 +1,438 @@
+// The page: token, sessions, run controls, electrode drag/power/on-off, display, readouts.
+// Everything goes through the documented REST API (api.js) and the session stream (stream.js).
+import { Api } from "./api.js";
+import { drawLegend, fillColours, range } from "./colour.js";
+import { View } from "./render.js";
+import { Stream } from "./stream.js";
+import { decodeArray } from "./wire.js";
+
+const $ = (id) => document.getElementById(id);
+const view = new View($("view"));
+
+const stats = {
+  framesReceived: { surface: 0, volume: 0 },
+  framesDrawn: 0,
+  drawnAt: [], // performance.now() of recent drawn frames
+  stepsAt: [], // [time, step] of recent frames
+  applyMs: 0, // mean decode + geometry time of a drawn frame, ms
+  renderMs: 0,
+  bytes: 0,
+  reconnects: 0,
+};
+
+const st = {
+  api: null,
+  session: null,
+  electrodes: [],
+  streams: null,
+  wantRunning: false,
+  raw: { surface: null, volume: null }, // newest undrawn messages
+  last: { surface: null, volume: null }, // newest drawn messages (kept for re-colouring)
+  report: null,
+  dragging: false,
+  lastPoll: 0,
+  tag: 0,
+  exaggeration: 1,
+};
+
+function setStatus(text, isError = false) {
+  const el = $("status");
+  el.textContent = text;
+  el.className = isError ? "error" : "";
+}
+
+async function guarded(what, fn) {
+  try {
+    return await fn();
+  } catch (err) {
+    setStatus(`${what}: ${err.message}`, true);
+    return undefined;
+  }
+}
+
+// ------------------------------------------------------------------ sessions
+async function connect() {
+  const token = $("token").value.trim();
+  localStorage.setItem("diathermy.token", token);
+  st.api = new Api(window.location.origin, token);
+  await guarded("connect", async () => {
+    const scenes = await st.api.scenes();
+    const sel = $("scene");
+    sel.innerHTML = "";
+    for (const [name, scene] of Object.entries(scenes)) {
+      const opt = document.createElement("option");
+      opt.value = name;
+      opt.textContent = `${name} (${scene.grid.join("x")})`;
+      opt.title = scene.description || "";
+      sel.appendChild(opt);
+    }
+    await refreshSessions();
+    setStatus("connected");
+  });
+}
+
+async function refreshSessions() {
+  const list = await st.api.sessions();
+  const sel = $("sessions");
+  sel.innerHTML = '<option value="">(none)</option>';
+  for (const s of list) {
+    const opt = document.createElement("option");
+    opt.value = s.id;
+    opt.textContent = `${s.scene_name} ${s.grid.shape.join("x")} step ${s.step}`;
+    sel.appendChild(opt);
+  }
+  if (st.session) sel.value = st.session.id;
+}
+
+function createBody() {
+  const text = $("scene-json").value.trim();
+  let body;
+  if (text) {
+    let scene;
+    try {
+      scene = JSON.parse(text);
+    } catch (err) {
+      throw new Error(`scene JSON: ${err.message}`);
+    }
+    body = { scene };
+  } else {
+    body = { builtin: $("scene").value || "default" };
+  }
+  const grid = ["grid-z", "grid-y", "grid-x"].map((id) => $(id).value.trim());
+  if (grid.some((v) => v !== "")) {
+    if (grid.some((v) => v === "")) throw new Error("grid: give all three of nz, ny, nx");
+    body.grid = grid.map(Number);
+  }
+  return body;
+}
+
+async function createSession() {
+  if (!st.api) await connect();
+  await guarded("create", async () => {
+    setStatus("creating session…");
+    const info = await st.api.createSession(createBody());
+    await openSession(info);
+    await refreshSessions();
+  });
+}
+
+async function deleteSession() {
+  if (!st.session) return;
+  const id = st.session.id;
+  closeSession();
+  await guarded("delete", async () => {
+    await st.api.deleteSession(id);
+    await refreshSessions();
+    setStatus(`deleted session ${id}`);
+  });
+}
+
+function closeSession() {
+  if (st.streams) {
+    st.streams.surface.close();
+    st.streams.volume.close();
+  }
+  st.streams = null;
+  st.session = null;
+  st.wantRunning = false;
+  st.raw = { surface: null, volume: null };
+  st.last = { surface: null, volume: null };
+  view.clear();
+}
+
+function subscriptions() {
+  const colour = $("colour").value;
+  return {
+    surface: { fields: [colour, "displacement"], region: "surface", dtype: "float32", every: 1 },
+    volume: { fields: [colour, "displacement", "level_set"], region: "volume", dtype: "float32", every: 1 },
+  };
+}
+
+async function openSession(info) {
+  closeSession();
+  st.session = info;
+  st.electrodes = await st.api.electrodes(info.id);
+  const sel = $("electrode");
+  sel.innerHTML = "";
+  for (const e of st.electrodes) {
+    const opt = document.createElement("option");
+    opt.value = e.name;
+    opt.textContent = e.name;
+    sel.appendChild(opt);
+  }
+  const first = st.electrodes[0];
+  view.setGrid(info.grid, first ? first.radius_m : 0);
+  showElectrode();
+  const subs = subscriptions();
+  const url = st.api.streamUrl(info.id);
+  const handlers = (kind) => ({
+    onMessage: (msg, bytes) => onMessage(kind, msg, bytes),
+    onStatus: setStatus,
+    onOpen: (again) => {
+      if (again) stats.reconnects += 1;
+      setStatus(again ? "reconnected" : `session ${info.id} (${info.scene_name})`);
+      if (kind === "surface" && st.wantRunning) sendRun();
+    },
+  });
+  st.streams = {
+    surface: new Stream(url, subs.surface, handlers("surface")),
+    volume: new Stream(url, subs.volume, handlers("volume")),
+  };
+  st.streams.surface.connect();
+  st.streams.volume.connect();
+  $("sessions").value = info.id;
+  window.location.hash = info.id;
+}
+
+// ------------------------------------------------------------------ electrodes
+function currentElectrode() {
+  const name = $("electrode").value;
+  return st.electrodes.find((e) => e.name === name) || st.electrodes[0] || null;
+}
+
+function showElectrode() {
+  const e = currentElectrode();
+  if (!e) return;
+  if (!st.dragging) view.setElectrode(e.position_m[0], e.position_m[1], e.active);
+  if (document.activeElement !== $("power")) {
+    $("power").value = String(Math.round(e.power_w));
+    $("power-out").textContent = `${Math.round(e.power_w)} W`;
+  }
+  $("active").checked = e.active;
+}
+
+async function pollElectrodes(force = false) {
+  const now = performance.now();
+  if (!st.session || st.dragging || (!force && now - st.lastPoll < 400)) return;
+  st.lastPoll = now;
+  const id = st.session.id;
+  const list = await st.api.electrodes(id).catch(() => null);
+  if (list && st.session && st.session.id === id && !st.dragging) {
+    st.electrodes = list;
+    showElectrode();
+  }
+}
+
+function sendElectrode(change) {
+  const e = currentElectrode();
+  if (!e || !st.session) return;
+  Object.assign(e, change);
+  const msg = { type: "electrode", name: e.name, tag: ++st.tag, ...change };
+  if (!st.streams || !st.streams.surface.send(msg)) {
+    const { type: _t, tag: _g, name, ...body } = msg;
+    guarded("electrode", () => st.api.request("PATCH", `/v1/sessions/${st.session.id}/electrodes/${encodeURIComponent(name)}`, body));
+  }
+}
+
+let lastDragSend = 0;
+function dragTo(ev, final) {
+  const p = view.topPoint(ev.clientX, ev.clientY);
+  if (!p) return;
+  const e = currentElectrode();
+  view.setElectrode(p[0], p[1], e ? e.active : true);
+  const now = performance.now();
+  if (final || now - lastDragSend > 50) {
+    lastDragSend = now;
+    sendElectrode({ position_m: p });
+  }
+}
+
+// capture phase on the stage: decide before the orbit controls see the pointer
+$("stage").addEventListener("pointerdown", (ev) => {
+  if (ev.button !== 0 || ev.target !== view.canvas || !view.hitsElectrode(ev.clientX, ev.clientY)) return;
+  st.dragging = true;
+  view.controls.enabled = false;
+  view.canvas.setPointerCapture(ev.pointerId);
+  ev.preventDefault();
+}, true);
+view.canvas.addEventListener("pointermove", (ev) => { if (st.dragging) dragTo(ev, false); });
+view.canvas.addEventListener("pointerup", (ev) => {
+  if (!st.dragging) return;
+  dragTo(ev, true);
+  st.dragging = false;
+  view.controls.enabled = true;
+  st.lastPoll = performance.now(); // let the control reach the server before reading back
+});
+
+// ------------------------------------------------------------------ frames
+function onMessage(kind, msg, bytes) {
+  stats.bytes += bytes;
+  if (msg.type === "frame") {
+    stats.framesReceived[kind] += 1;
+    st.raw[kind] = msg;
+    if (kind === "surface") {
+      const now = performance.now();
+      stats.stepsAt.push([now, msg.step]);
+      while (stats.stepsAt.length > 2 && now - stats.stepsAt[0][0] > 3000) stats.stepsAt.shift();
+    }
+  } else if (msg.type === "error") {
+    setStatus(`${msg.error}${msg.field ? ` (${msg.field})` : ""}: ${msg.message}`, true);
+  } else if (msg.type === "ack" && msg.of === "run") {
+    setStatus(`running at ${msg.rate_hz} steps/s`);
+  } else if (msg.type === "ack" && msg.of === "pause") {
+    setStatus("paused");
+  }
+}
+
+function topLayer(arr, comps) {
+  const [nz, ny, nx] = arr.shape;
+  const n = ny * nx * comps;
+  return arr.values.subarray((nz - 1) * n, nz * n);
+}
+
+function applyFrames() {
+  const colour = $("colour").value;
+  const vol = st.last.volume;
+  const surf = st.last.surface;
+  const volCol = vol && vol.fields[colour] ? topLayer(decodeArray(vol.fields[colour]), 1) : null;
+  const surfCol = surf && surf.fields[colour] ? decodeArray(surf.fields[colour]).values : null;
+  const r = range(colour, [volCol, surfCol]);
+  drawLegend($("legend-bar"), $("legend-labels"), r);
+  if (vol && view.grid) {
+    const g = view.grid;
+    const colours = new Float32Array(3 * g.nx * g.ny).fill(0.6);
+    if (volCol) fillColours(volCol, r, colours);
+    const disp = vol.fields.displacement ? topLayer(decodeArray(vol.fields.displacement), 3) : null;
+    const phi = vol.fields.level_set ? topLayer(decodeArray(vol.fields.level_set), 1) : null;
+    const removed = phi ? Uint8Array.from(phi, (v) => (v < 0 ? 1 : 0)) : null;
+    view.updateTissue(colours, disp, removed, st.exaggeration);
+  }
+  if (surf && surf.surface && view.grid) {
+    const verts = decodeArray(surf.surface.vertices).values;
+    const faces = decodeArray(surf.surface.faces).values;
+    const colours = new Float32Array(verts.length).fill(0.6);
+    if (surfCol) fillColours(surfCol, r, colours);
+    const disp = surf.fields.displacement ? decodeArray(surf.fields.displacement).values : null;
+    view.updateCut(verts, faces, colours, disp, st.exaggeration);
+  }
+}
+
+function fmt(v, digits, unit) {
+  return v === null || v === undefined ? "-" : `${Number(v).toFixed(digits)} ${unit}`;
+}
+
+function updatePanel() {
+  const s = st.last.surface;
+  if (!s) return;
+  const rep = s.report;
+  $("p-step").textContent = String(s.step);
+  $("p-time").textContent = fmt(s.time_s, 2, "s");
+  const h = stats.stepsAt;
+  const rate = h.length > 1 ? (1000 * (h[h.length - 1][1] - h[0][1])) / (h[h.length - 1][0] - h[0][0] || 1) : 0;
+  $("p-rate").textContent = rate.toFixed(1);
+  $("p-power").textContent = rep ? fmt(rep.delivered_power_w, 1, "W") : "-";
+  $("p-tmax").textContent = rep ? `${rep.max_temperature_k.toFixed(0)} K (${(rep.max_temperature_k - 273.15).toFixed(0)} °C)` : "-";
+  $("p-depth").textContent = rep ? fmt(1e3 * rep.crater_depth_m, 2, "mm") : "-";
+  $("p-cut").textContent = rep ? fmt(1e9 * rep.cut_volume_m3, 2, "mm³") : "-";
+  const dropped = st.streams ? st.streams.surface.totalDropped + st.streams.volume.totalDropped : 0;
+  $("p-dropped").textContent = String(dropped);
+}
+
+function drawFps() {
+  const now = performance.now();
+  while (stats.drawnAt.length && now - stats.drawnAt[0] > 2000) stats.drawnAt.shift();
+  return stats.drawnAt.length / 2;
+}
+
+function tick() {
+  const fresh = (st.raw.surface ? 1 : 0) + (st.raw.volume ? 1 : 0);
+  if (fresh) {
+    const t0 = performance.now();
+    if (st.raw.surface) st.last.surface = st.raw.surface;
+    if (st.raw.volume) st.last.volume = st.raw.volume;
+    st.raw = { surface: null, volume: null };
+    applyFrames();
+    const t1 = performance.now();
+    view.render();
+    const t2 = performance.now();
+    stats.applyMs = 0.8 * stats.applyMs + 0.2 * (t1 - t0);
+    stats.renderMs = 0.8 * stats.renderMs + 0.2 * (t2 - t1);
+    stats.framesDrawn += fresh;
+    for (let i = 0; i < fresh; i++) stats.drawnAt.push(t2);
+    updatePanel();
+    pollElectrodes();
+  } else if (view.dirty) {
+    view.render();
+  }
+  $("p-fps").textContent = drawFps().toFixed(1);
+  requestAnimationFrame(tick);
+}
+
+// ------------------------------------------------------------------ controls
+function sendRun() {
+  const rate = Number($("rate").value) || 10;
+  if (st.streams) st.streams.surface.send({ type: "run", rate_hz: rate });
+}
+
+$("connect").addEventListener("click", connect);
+$("create").addEventListener("click", createSession);
+$("delete").addEventListener("click", deleteSession);
+$("sessions").addEventListener("change", async () => {
+  const id = $("sessions").value;
+  if (!id) return closeSession();
+  await guarded("open", async () => openSession(await st.api.session(id)));
+});
+$("run").addEventListener("click", () => { st.wantRunning = true; sendRun(); });
+$("pause").addEventListener("click", () => {
+  st.wantRunning = false;
+  if (st.streams) st.streams.surface.send({ type: "pause" });
+});
+$("step").addEventListener("click", () => { if (st.streams) st.streams.surface.send({ type: "step", n: 1 }); });
+$("rate").addEventListener("change", () => { if (st.wantRunning) sendRun(); });
+$("electrode").addEventListener("change", showElectrode);
+$("power").addEventListener("input", () => { $("power-out").textContent = `${$("power").value} W`; });
+$("power").addEventListener("change", () => sendElectrode({ power_w: Number($("power").value) }));
+$("active").addEventListener("change", () => sendElectrode({ active: $("active").checked }));
+$("colour").addEventListener("change", () => {
+  if (!st.streams) return;
+  const subs = subscriptions();
+  st.streams.surface.resubscribe(subs.surface);
+  st.streams.volume.resubscribe(subs.volume);
+});
+$("exag").addEventListener("input", () => {
+  st.exaggeration = 10 ** Number($("exag").value);
+  $("exag-out").textContent = st.exaggeration < 10 ? st.exaggeration.toFixed(1) : st.exaggeration.toFixed(0);
+  if (st.last.surface || st.last.volume) applyFrames();
+});
+
+// ------------------------------------------------------------------ hooks for tests and benchmarks
+window.viewer = {
+  stats,
+  state: st,
+  panel() {
+    const out = {};
+    for (const row of document.querySelectorAll("#panel tr")) out[row.cells[0].textContent] = row.cells[1].textContent;
+    return out;
+  },
+  report() { return st.last.surface ? st.last.surface.report : null; },
+  cutFaces() { return view.cutFaces || 0; },
+  electrodeScreenPosition() {
+    const e = currentElectrode();
+    return e && view.grid ? view.screenOf(e.position_m[0], e.position_m[1]) : null;
+  },
+  screenOf(x, y) { return view.screenOf(x, y); },
+  drawFps,
+  // Re-draws the newest frames n times (decode, geometry, colours, render, GPU sync): the
+  // viewer's own frames per second, independent of how fast the server steps.
+  redrawBenchmark(n) {
+    const gl = view.renderer.getContext();
+    const px = new Uint8Array(4);
+    const t0 = performance.now();
+    for (let i = 0; i < n; i++) {
+      applyFrames();
+      view.render();
+      gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
+    }
+    const s = (performance.now() - t0) / 1000;
+    return { frames: n, seconds: s, fps: n / s };
+  },
+};
+
+$("token").value = new URLSearchParams(window.location.search).get("token") || localStorage.getItem("diathermy.token") || "";
+requestAnimationFrame(tick);
+if ($("token").value) {
+  connect().then(async () => {
+    const id = window.location.hash.slice(1);
+    if (id && st.api) await guarded("open", async () => openSession(await st.api.session(id)));
+  });
+}
