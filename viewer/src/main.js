@@ -389,6 +389,11 @@ $("colour").addEventListener("change", () => {
   st.streams.surface.resubscribe(subs.surface);
   st.streams.volume.resubscribe(subs.volume);
 });
+$("focus").addEventListener("click", () => {
+  const e = currentElectrode();
+  if (e && view.grid) view.look(e.position_m[0], e.position_m[1], Math.max(0.12, 30 * e.radius_m / view.grid.L));
+});
+$("overview").addEventListener("click", () => view.overview());
 $("exag").addEventListener("input", () => {
   st.exaggeration = 10 ** Number($("exag").value);
   $("exag-out").textContent = st.exaggeration < 10 ? st.exaggeration.toFixed(1) : st.exaggeration.toFixed(0);
@@ -397,6 +402,7 @@ $("exag").addEventListener("input", () => {
 
 // ------------------------------------------------------------------ hooks for tests and benchmarks
 window.viewer = {
+  view,
   stats,
   state: st,
   panel() {

@@ -122,9 +122,9 @@ export class View {
     for (let j = 0; j < ny - 1; j++) {
       for (let i = 0; i < nx - 1; i++) {
         const a = j * nx + i, b = a + 1, c = a + nx, d = c + 1;
-        if (removed && (removed[a] || removed[b] || removed[c] || removed[d])) continue;
-        idx[m++] = a; idx[m++] = b; idx[m++] = d;
-        idx[m++] = a; idx[m++] = d; idx[m++] = c;
+        // per triangle, so the opening follows the crater's rim more closely than whole cells
+        if (!removed || !(removed[a] || removed[b] || removed[d])) { idx[m++] = a; idx[m++] = b; idx[m++] = d; }
+        if (!removed || !(removed[a] || removed[d] || removed[c])) { idx[m++] = a; idx[m++] = d; idx[m++] = c; }
       }
     }
     const geom = this.tissue ? this.tissue.geometry : null;
@@ -214,6 +214,25 @@ export class View {
     this.group.updateMatrixWorld();
     const v = new THREE.Vector3(x, y, this.grid.top).applyMatrix4(this.group.matrixWorld).project(this.camera);
     return { x: rect.left + ((v.x + 1) / 2) * rect.width, y: rect.top + ((1 - v.y) / 2) * rect.height };
+  }
+
+  // point the camera at (x, y) on the top surface from ``distance`` (scene units; 1 = block size)
+  look(x, y, distance) {
+    if (!this.grid) return;
+    this.group.updateMatrixWorld();
+    const target = new THREE.Vector3(x, y, this.grid.top).applyMatrix4(this.group.matrixWorld);
+    const dir = new THREE.Vector3(0, -1.35, 1.05).normalize().multiplyScalar(distance);
+    this.controls.target.copy(target);
+    this.camera.position.copy(target).add(dir);
+    this.controls.update();
+    this.dirty = true;
+  }
+
+  overview() {
+    this.controls.target.set(0, 0, 0);
+    this.camera.position.set(0.0, -1.35, 1.05);
+    this.controls.update();
+    this.dirty = true;
   }
 
   render() {
