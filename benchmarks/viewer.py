@@ -95,6 +95,7 @@ class Server:
         return rep
 
     def stop(self) -> None:
+        self.http.close()
         self.proc.terminate()
         self.proc.wait(timeout=60)
 
@@ -174,7 +175,9 @@ def picture(page: Page, server: Server, out: Path) -> dict[str, Any]:
         )
         drag_to(0.006 + 0.0004 * k)
     page.click("#pause")
-    page.wait_for_function("document.getElementById('status').textContent === 'paused'")
+    page.wait_for_function(
+        "document.getElementById('status').textContent === 'paused'", timeout=120_000
+    )
     page.click("#focus")
     page.wait_for_timeout(1000)
     page.screenshot(path=str(out))

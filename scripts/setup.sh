@@ -10,7 +10,7 @@ PY=${PYTHON:-python3}
 (cd viewer && npm ci --no-audit --no-fund --loglevel=error && npm run build --silent)
 if ! command -v chromium >/dev/null 2>&1; then
     if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
-        apt-get update -qq && apt-get install -y -qq chromium >/dev/null
+        apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null
     else
         echo "setup: chromium is missing (tests/viewer needs it): apt-get install chromium" >&2
     fi

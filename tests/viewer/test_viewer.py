@@ -143,6 +143,19 @@ def test_viewer_drives_a_cutting_session(live: LiveServer, browser: Browser) -> 
         change = np.abs(after_img[region].astype(float) - before_img[region].astype(float))
         assert change.mean() > 4, f"crater region barely changed ({change.mean():.2f})"
 
+        # colour by another field (the legend follows); exaggerate the displacement
+        page.select_option("#colour", "pressure")
+        wait_for(page, "document.getElementById('legend-labels').textContent.includes('MPa')")
+        page.select_option("#colour", "thermal_damage")
+        wait_for(page, "document.getElementById('legend-labels').textContent.includes('damaged')")
+        plain = canvas_pixels(page)
+        page.locator("#exag").fill("2.5")
+        page.locator("#exag").dispatch_event("input")
+        page.wait_for_timeout(300)
+        assert page.inner_text("#exag-out") == "316"
+        bent = canvas_pixels(page)
+        assert np.abs(bent.astype(float) - plain.astype(float)).mean() > 0.5
+
         # a dropped connection: both streams come back and frames flow again
         step = page.evaluate("window.viewer.report().step")
         page.evaluate(

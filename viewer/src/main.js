@@ -31,6 +31,8 @@ const st = {
   dragging: false,
   lastPoll: 0,
   tag: 0,
+  pending: new Map(), // electrode name -> changes not sent yet
+  inflightTag: null, // tag of the electrode control awaiting its ack
   exaggeration: 1,
 };
 
@@ -134,6 +136,8 @@ function closeSession() {
   st.streams = null;
   st.session = null;
   st.wantRunning = false;
+  st.pending.clear();
+  st.inflightTag = null;
   st.raw = { surface: null, volume: null };
   st.last = { surface: null, volume: null };
   view.clear();
@@ -170,7 +174,11 @@ async function openSession(info) {
     onOpen: (again) => {
       if (again) stats.reconnects += 1;
       setStatus(again ? "reconnected" : `session ${info.id} (${info.scene_name})`);
-      if (kind === "surface" && st.wantRunning) sendRun();
+      if (kind === "surface") {
+        st.inflightTag = null; // an unanswered control died with the old connection
+        if (st.wantRunning) sendRun();
+        flushElectrode();
+      }
     },
   });
   st.streams = {
@@ -212,14 +220,26 @@ async function pollElectrodes(force = false) {
   }
 }
 
+// One electrode control in flight at a time; later changes merge into the next one, so while a
+// long step holds the session no backlog of stale positions queues up ahead of run or pause.
 function sendElectrode(change) {
   const e = currentElectrode();
   if (!e || !st.session) return;
   Object.assign(e, change);
-  const msg = { type: "electrode", name: e.name, tag: ++st.tag, ...change };
-  if (!st.streams || !st.streams.surface.send(msg)) {
-    const { type: _t, tag: _g, name, ...body } = msg;
-    guarded("electrode", () => st.api.request("PATCH", `/v1/sessions/${st.session.id}/electrodes/${encodeURIComponent(name)}`, body));
+  st.pending.set(e.name, { ...(st.pending.get(e.name) || {}), ...change });
+  flushElectrode();
+}
+
+function flushElectrode() {
+  if (st.inflightTag !== null || st.pending.size === 0 || !st.session) return;
+  const [name, change] = st.pending.entries().next().value;
+  st.pending.delete(name);
+  const tag = ++st.tag;
+  if (st.streams && st.streams.surface.send({ type: "electrode", name, tag, ...change })) {
+    st.inflightTag = tag;
+  } else {
+    const path = `/v1/sessions/${st.session.id}/electrodes/${encodeURIComponent(name)}`;
+    guarded("electrode", () => st.api.request("PATCH", path, change));
   }
 }
 
@@ -253,7 +273,14 @@ view.canvas.addEventListener("pointerup", (ev) => {
   st.lastPoll = performance.now(); // let the control reach the server before reading back
 });
 
-const onMessage = (kind, msg, bytes) => receive(st, stats, setStatus, kind, msg, bytes);
+function onMessage(kind, msg, bytes) {
+  receive(st, stats, setStatus, kind, msg, bytes);
+  const answered = (msg.type === "ack" && msg.of === "electrode" && msg.tag === st.inflightTag) || msg.type === "error";
+  if (kind === "surface" && answered) {
+    st.inflightTag = null;
+    flushElectrode();
+  }
+}
 const applyFrames = () => paint(st, view);
 const updatePanel = () => panel(st, stats);
 const drawFps = () => fps(stats);
