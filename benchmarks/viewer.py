@@ -178,10 +178,15 @@ def picture(page: Page, server: Server, out: Path) -> dict[str, Any]:
     page.wait_for_function(
         "document.getElementById('status').textContent === 'paused'", timeout=120_000
     )
-    page.click("#focus")
-    page.wait_for_timeout(1000)
-    page.screenshot(path=str(out))
-    return dict(page.evaluate("window.viewer.panel()"))
+    panel: dict[str, Any] = {}
+    for _ in range(10):  # a step already under way when paused still arrives: wait it out
+        page.wait_for_timeout(1000)
+        before = page.evaluate("window.viewer.panel()")
+        page.screenshot(path=str(out))
+        panel = dict(page.evaluate("window.viewer.panel()"))
+        if panel["step"] == before["step"]:
+            break
+    return panel
 
 
 def run(

@@ -37,21 +37,27 @@ export const QUANTITIES = {
   },
 };
 
-export function maxShown(quantity, arrays) {
-  let hi = -Infinity;
+// The top of the colour range: the 98th percentile of the shown values (a few hot nodes at the
+// electrode would otherwise leave everything else at the bottom of the map) and the true maximum.
+export function upperShown(quantity, arrays) {
+  const shown = [];
   for (const a of arrays) {
     if (!a) continue;
     for (let i = 0; i < a.length; i++) {
       const v = quantity.show(a[i]);
-      if (Number.isFinite(v) && v > hi) hi = v;
+      if (Number.isFinite(v)) shown.push(v);
     }
   }
-  return hi;
+  if (shown.length === 0) return { p98: -Infinity, max: -Infinity };
+  const sorted = Float64Array.from(shown).sort();
+  return { p98: sorted[Math.floor(0.98 * (sorted.length - 1))], max: sorted[sorted.length - 1] };
 }
 
 export function range(name, arrays) {
   const q = QUANTITIES[name];
-  return { q, lo: q.min(), hi: q.max(maxShown(q, arrays)) };
+  const { p98, max } = upperShown(q, arrays);
+  const hi = q.max(p98);
+  return { q, lo: q.min(), hi, clipped: max > hi };
 }
 
 export function fillColours(values, r, out) {
@@ -79,7 +85,7 @@ export function drawLegend(canvas, labels, r) {
   const unit = r.q.unit ? ` ${r.q.unit}` : "";
   const mid = 0.5 * (r.lo + r.hi);
   labels.innerHTML = "";
-  for (const [text, cls] of [[`${fmt(r.hi)}${unit}`, "hi"], [`${r.q.label}`, "name"], [`${fmt(mid)}`, "mid"], [`${fmt(r.lo)}${unit}`, "lo"]]) {
+  for (const [text, cls] of [[`${r.clipped ? "≥ " : ""}${fmt(r.hi)}${unit}`, "hi"], [`${r.q.label}`, "name"], [`${fmt(mid)}`, "mid"], [`${fmt(r.lo)}${unit}`, "lo"]]) {
     const div = document.createElement("div");
     div.className = cls;
     div.textContent = text;

@@ -27,7 +27,6 @@ const st = {
   wantRunning: false,
   raw: { surface: null, volume: null }, // newest undrawn messages
   last: { surface: null, volume: null }, // newest drawn messages (kept for re-colouring)
-  report: null,
   dragging: false,
   lastPoll: 0,
   tag: 0,
@@ -214,7 +213,9 @@ async function pollElectrodes(force = false) {
   st.lastPoll = now;
   const id = st.session.id;
   const list = await st.api.electrodes(id).catch(() => null);
-  if (list && st.session && st.session.id === id && !st.dragging) {
+  // while a control is unanswered the server may still hold the old values: keep the local ones
+  const settled = st.inflightTag === null && st.pending.size === 0;
+  if (list && st.session && st.session.id === id && !st.dragging && settled) {
     st.electrodes = list;
     showElectrode();
   }
