@@ -11,6 +11,7 @@ from __future__ import annotations
 import io
 import json
 import time
+from pathlib import Path
 from typing import Any
 
 import httpx
@@ -18,7 +19,8 @@ import numpy as np
 from PIL import Image
 from playwright.sync_api import Browser, Page
 
-from tests.service.conftest import CUT, TOKEN_A, LiveServer
+from diathermy.service.engine import DefaultEngine
+from tests.service.conftest import CUT, TOKEN_A, LiveServer, make_settings
 from tests.viewer.conftest import page_errors
 
 SCENE = {**CUT["scene"], "grid": [9, 9, 17]}
@@ -174,3 +176,26 @@ def test_viewer_drives_a_cutting_session(live: LiveServer, browser: Browser) -> 
     finally:
         api.close()
         page.close()
+
+
+def test_viewer_reconnects_after_the_server_restarts(tmp_path: Path, browser: Browser) -> None:
+    settings = make_settings(tmp_path / "data")
+    server = LiveServer(settings, DefaultEngine()).start()
+    with server.client() as api:
+        sid = api.post("/v1/sessions", json={"scene": SCENE}).json()["id"]
+    page = browser.new_page(viewport={"width": 900, "height": 600})
+    errors = page_errors(page)
+    try:
+        page.goto(f"{server.url}/viewer/?token={TOKEN_A}#{sid}")  # opens the session at once
+        wait_for(page, "window.viewer.report() === null && window.viewer.stats.framesDrawn >= 2")
+        server.stop()  # checkpoints the session; both streams drop
+        wait_for(page, "document.getElementById('status').textContent.includes('reconnecting')")
+        server = LiveServer(settings, DefaultEngine()).start()  # same port and data directory
+        wait_for(page, "window.viewer.stats.reconnects >= 2", 30)
+        page.click("#step")
+        wait_for(page, "(window.viewer.report() || {step: 0}).step === 1", 30)
+        assert page.evaluate("window.viewer.panel()['step']") == "1"
+    finally:
+        page.close()
+        server.stop()
+    assert errors == [], errors
