@@ -44,8 +44,7 @@ export function applyFrames(st, view) {
     if (volCol) fillColours(volCol, r, colours);
     const disp = vol.fields.displacement ? topLayer(decodeArray(vol.fields.displacement), 3) : null;
     const phi = vol.fields.level_set ? topLayer(decodeArray(vol.fields.level_set), 1) : null;
-    const removed = phi ? Uint8Array.from(phi, (v) => (v < 0 ? 1 : 0)) : null;
-    view.updateTissue(colours, disp, removed, st.exaggeration);
+    view.updateTissue(colours, disp, phi, st.exaggeration);
   }
   if (surf && surf.surface && view.grid) {
     const verts = decodeArray(surf.surface.vertices).values;

@@ -2,6 +2,7 @@
 // Coordinates are the simulation's (x, y, z) in m, z up; one group scales the block to ~1 unit.
 import * as THREE from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
+import { tissueMesh } from "./tissue.js";
 
 export class View {
   constructor(canvas) {
@@ -71,24 +72,9 @@ export class View {
     box.position.set(x0 + lx / 2, y0 + ly / 2, z0 + lz / 2);
     this.group.add(box);
 
-    const n = nx * ny;
-    const geom = new THREE.BufferGeometry();
-    const pos = new Float32Array(3 * n);
-    for (let j = 0; j < ny; j++) {
-      for (let i = 0; i < nx; i++) {
-        const p = 3 * (j * nx + i);
-        pos[p] = x0 + i * this.grid.dx;
-        pos[p + 1] = y0 + j * this.grid.dy;
-        pos[p + 2] = this.grid.top;
-      }
-    }
-    geom.setAttribute("position", new THREE.BufferAttribute(pos, 3));
-    const col = new Float32Array(3 * n).fill(0.6);
-    geom.setAttribute("color", new THREE.BufferAttribute(col, 3));
-    this.tissueIndex = new Uint32Array(6 * (nx - 1) * (ny - 1));
-    this.setTissueIndex(null);
-    this.tissue = new THREE.Mesh(geom, new THREE.MeshLambertMaterial({ vertexColors: true, side: THREE.DoubleSide }));
+    this.tissue = new THREE.Mesh(new THREE.BufferGeometry(), new THREE.MeshLambertMaterial({ vertexColors: true, side: THREE.DoubleSide }));
     this.group.add(this.tissue);
+    this.updateTissue(new Float32Array(3 * nx * ny).fill(0.6), null, null, 1);
 
     const cutGeom = new THREE.BufferGeometry();
     this.cut = new THREE.Mesh(cutGeom, new THREE.MeshLambertMaterial({ vertexColors: true, side: THREE.DoubleSide }));
@@ -114,46 +100,18 @@ export class View {
     this.dirty = true;
   }
 
-  // removed: per top-surface node, whether phi < 0 there (null: nothing removed)
-  setTissueIndex(removed) {
-    const { nx, ny } = this.grid;
-    const idx = this.tissueIndex;
-    let m = 0;
-    for (let j = 0; j < ny - 1; j++) {
-      for (let i = 0; i < nx - 1; i++) {
-        const a = j * nx + i, b = a + 1, c = a + nx, d = c + 1;
-        // per triangle, so the opening follows the crater's rim more closely than whole cells
-        if (!removed || !(removed[a] || removed[b] || removed[d])) { idx[m++] = a; idx[m++] = b; idx[m++] = d; }
-        if (!removed || !(removed[a] || removed[d] || removed[c])) { idx[m++] = a; idx[m++] = d; idx[m++] = c; }
-      }
-    }
-    const geom = this.tissue ? this.tissue.geometry : null;
-    if (geom) {
-      geom.setIndex(new THREE.BufferAttribute(idx.slice(0, m), 1));
-      geom.computeVertexNormals();
-    }
-    this._tissueMissing = m;
-  }
-
-  // top layer of volume fields: colours (3 per node), displacement (nx*ny*3, m), removed mask
-  updateTissue(colours, disp, removed, exaggeration) {
+  // the top layer of volume fields: colours (3 per node), displacement (3 per node, m) and the
+  // level set (m; null: nothing removed)
+  updateTissue(colours, disp, phi, exaggeration) {
     if (!this.tissue) return;
-    const g = this.grid;
-    const geom = this.tissue.geometry;
-    const pos = geom.attributes.position.array;
-    for (let j = 0; j < g.ny; j++) {
-      for (let i = 0; i < g.nx; i++) {
-        const n = j * g.nx + i;
-        const p = 3 * n;
-        pos[p] = g.x0 + i * g.dx + (disp ? exaggeration * disp[p] : 0);
-        pos[p + 1] = g.y0 + j * g.dy + (disp ? exaggeration * disp[p + 1] : 0);
-        pos[p + 2] = g.top + (disp ? exaggeration * disp[p + 2] : 0);
-      }
-    }
-    geom.attributes.position.needsUpdate = true;
-    geom.attributes.color.array.set(colours);
-    geom.attributes.color.needsUpdate = true;
-    this.setTissueIndex(removed);
+    const mesh = tissueMesh(this.grid, colours, disp, phi, exaggeration);
+    const geom = new THREE.BufferGeometry();
+    geom.setAttribute("position", new THREE.BufferAttribute(mesh.positions, 3));
+    geom.setAttribute("color", new THREE.BufferAttribute(mesh.colours, 3));
+    geom.setIndex(new THREE.BufferAttribute(mesh.index, 1));
+    geom.computeVertexNormals();
+    this.tissue.geometry.dispose();
+    this.tissue.geometry = geom;
     this.dirty = true;
   }
 
