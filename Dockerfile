@@ -9,6 +9,14 @@
 #     --build-arg BASE_IMAGE=pytorch/pytorch:2.5.1-cuda12.4-cudnn9-runtime \
 #     --build-arg TORCH_INDEX_URL=https://download.pytorch.org/whl/cu124 .
 ARG BASE_IMAGE=python:3.11-slim
+
+# The browser viewer's bundle (/viewer), built from viewer/package-lock.json.
+FROM node:20-slim AS viewer
+WORKDIR /src
+COPY viewer ./viewer
+RUN mkdir -p server/diathermy/service/static/viewer \
+    && cd viewer && npm ci --no-audit --no-fund && npm run build
+
 FROM ${BASE_IMAGE}
 ARG TORCH_INDEX_URL=https://download.pytorch.org/whl/cpu
 
@@ -19,6 +27,7 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
 WORKDIR /app
 COPY pyproject.toml README.md ./
 COPY server ./server
+COPY --from=viewer /src/server/diathermy/service/static/viewer/viewer.js ./server/diathermy/service/static/viewer/
 RUN python3 -m pip install --extra-index-url "${TORCH_INDEX_URL}" . \
     && useradd --create-home --uid 1000 diathermy \
     && mkdir -p /data && chown diathermy /data

@@ -31,6 +31,7 @@ from diathermy_client._errors import (
 from diathermy_client._models import (
     Ack,
     EffectReport,
+    Electrode,
     ElectrodeAck,
     Fields,
     Frame,
@@ -66,6 +67,7 @@ __all__ = [
     "Conflict",
     "DiathermyError",
     "EffectReport",
+    "Electrode",
     "ElectrodeAck",
     "Fields",
     "Frame",

@@ -16,6 +16,7 @@ from diathermy_client._core import Call, ClientCore, Response, RetryPolicy, SSEP
 from diathermy_client._errors import DiathermyError, Timeout
 from diathermy_client._models import (
     Dtype,
+    Electrode,
     ElectrodeAck,
     Fields,
     Health,
@@ -182,6 +183,17 @@ class AsyncClient:
                 active=active,
             )
         )
+
+    async def list_electrodes(self, session_id: str) -> list[Electrode]:
+        """Every electrode now (position, drive, on/off).
+
+        Example: ``(await client.list_electrodes(sid))[0].position_m``
+        """
+        return await self._send(self._core.list_electrodes(session_id))
+
+    async def get_electrode(self, session_id: str, name: str = "active") -> Electrode:
+        """One electrode now. Example: ``(await client.get_electrode(sid)).power_w``."""
+        return await self._send(self._core.get_electrode(session_id, name))
 
     async def read_fields(
         self,
@@ -403,6 +415,14 @@ class AsyncSession:
             current_density_a_per_m2=current_density_a_per_m2,
             active=active,
         )
+
+    async def electrodes(self) -> list[Electrode]:
+        """Every electrode now. Example: ``(await session.electrodes())[0].active``."""
+        return await self.client.list_electrodes(self.id)
+
+    async def electrode(self, name: str = "active") -> Electrode:
+        """One electrode now. Example: ``(await session.electrode()).position_m``."""
+        return await self.client.get_electrode(self.id, name)
 
     async def move_electrode(self, x_m: float, y_m: float, name: str = "active") -> ElectrodeAck:
         """Move an electrode on the top surface. Example: ``await session.move_electrode(0.1, 0.05)``."""

@@ -21,6 +21,7 @@ import numpy as np
 from diathermy_client._errors import DiathermyError, ServerError, error_for
 from diathermy_client._models import (
     Dtype,
+    Electrode,
     ElectrodeAck,
     ElectrodeUpdate,
     Fields,
@@ -260,6 +261,18 @@ class ClientCore:
         return Call(
             Request("PATCH", f"/v1/sessions/{_seg(session_id)}/electrodes/{_seg(name)}", json=body),
             lambda r: ElectrodeAck.model_validate(json_body(r)),
+        )
+
+    def list_electrodes(self, session_id: str) -> Call[list[Electrode]]:
+        return Call(
+            Request("GET", f"/v1/sessions/{_seg(session_id)}/electrodes"),
+            lambda r: [Electrode.model_validate(e) for e in json_body(r)["electrodes"]],
+        )
+
+    def get_electrode(self, session_id: str, name: str = "active") -> Call[Electrode]:
+        return Call(
+            Request("GET", f"/v1/sessions/{_seg(session_id)}/electrodes/{_seg(name)}"),
+            lambda r: Electrode.model_validate(json_body(r)),
         )
 
     def read_fields(

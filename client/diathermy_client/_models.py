@@ -125,6 +125,22 @@ class ElectrodeAck(_Result):
     control_id: int
 
 
+class Electrode(_Result):
+    """An electrode at the session's current time: position (x, y) m, drive, on/off."""
+
+    name: str
+    position_m: tuple[float, float]
+    radius_m: float
+    drive: Literal["power", "current_density"]
+    power_w: float
+    current_density_a_per_m2: float
+    active: bool
+    follows_path: bool
+    control_id: int
+    step: int
+    time_s: float
+
+
 class Health(_Result):
     status: Literal["ok", "starting"]
     sessions: int = 0

@@ -14,6 +14,7 @@ from diathermy_client._core import Call, ClientCore, Response, RetryPolicy, SSEP
 from diathermy_client._errors import DiathermyError, Timeout
 from diathermy_client._models import (
     Dtype,
+    Electrode,
     ElectrodeAck,
     Fields,
     Health,
@@ -181,6 +182,17 @@ class Client:
                 active=active,
             )
         )
+
+    def list_electrodes(self, session_id: str) -> list[Electrode]:
+        """Every electrode now (position, drive, on/off).
+
+        Example: ``(client.list_electrodes(sid))[0].position_m``
+        """
+        return self._send(self._core.list_electrodes(session_id))
+
+    def get_electrode(self, session_id: str, name: str = "active") -> Electrode:
+        """One electrode now. Example: ``(client.get_electrode(sid)).power_w``."""
+        return self._send(self._core.get_electrode(session_id, name))
 
     def read_fields(
         self,
@@ -396,6 +408,14 @@ class Session:
             current_density_a_per_m2=current_density_a_per_m2,
             active=active,
         )
+
+    def electrodes(self) -> list[Electrode]:
+        """Every electrode now. Example: ``(session.electrodes())[0].active``."""
+        return self.client.list_electrodes(self.id)
+
+    def electrode(self, name: str = "active") -> Electrode:
+        """One electrode now. Example: ``(session.electrode()).position_m``."""
+        return self.client.get_electrode(self.id, name)
 
     def move_electrode(self, x_m: float, y_m: float, name: str = "active") -> ElectrodeAck:
         """Move an electrode on the top surface. Example: ``session.move_electrode(0.1, 0.05)``."""

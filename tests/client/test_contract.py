@@ -39,6 +39,7 @@ RESULTS = {
     "SessionPublic": m.SessionInfo,
     "StepResult": m.StepResult,
     "ElectrodeAck": m.ElectrodeAck,
+    "ElectrodeState": m.Electrode,
     "Health": m.Health,
     "JobPublic": m.Job,
     "JobProgressPublic": m.JobProgress,

@@ -21,6 +21,7 @@ PUBLIC = {
     "Conflict",
     "DiathermyError",
     "EffectReport",
+    "Electrode",
     "ElectrodeAck",
     "Fields",
     "Frame",

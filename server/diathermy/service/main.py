@@ -17,7 +17,18 @@ from diathermy.service.errors import install_error_handlers
 from diathermy.service.metrics import ServiceMetrics
 from diathermy.service.middleware import LimitAndLogMiddleware
 from diathermy.service.registry import SessionRegistry
-from diathermy.service.routes import fields, health, jobs, models, reports, scenes, sessions, stream
+from diathermy.service.routes import (
+    electrodes,
+    fields,
+    health,
+    jobs,
+    models,
+    reports,
+    scenes,
+    sessions,
+    stream,
+)
+from diathermy.service.routes.viewer import mount_viewer
 from diathermy.service.sessions import save_dirty
 from diathermy.service.state import AppState
 from diathermy.version import __version__
@@ -77,6 +88,7 @@ def create_app(settings: Settings | None = None, *, engine: EngineAdapter | None
         LimitAndLogMiddleware, max_bytes=settings.max_request_bytes, metrics=state.metrics
     )
     install_error_handlers(app)
-    for module in (health, scenes, sessions, fields, stream, jobs, models, reports):
+    for module in (health, scenes, sessions, electrodes, fields, stream, jobs, models, reports):
         app.include_router(module.router)
+    mount_viewer(app)
     return app

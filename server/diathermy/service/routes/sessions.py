@@ -25,6 +25,7 @@ SESSION_LINKS = {
     op: {"operationId": op, "parameters": {"session_id": "$response.body#/id"}}
     for op in (
         "get_session",
+        "list_electrodes",
         "step_session",
         "take_snapshot",
         "list_snapshots",

@@ -1,0 +1,30 @@
+"""A tiny run of benchmarks/viewer.py: server, page and both measurements end to end."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _load_benchmark():  # noqa: ANN202 (a module)
+    spec = importlib.util.spec_from_file_location("viewer_benchmark", ROOT / "benchmarks/viewer.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_viewer_benchmark_runs_tiny_and_writes_its_table(tmp_path: Path) -> None:
+    bench = _load_benchmark()
+    text = bench.run(tmp_path, seconds=1.0, default_steps=2, grid=[5, 5, 9], picture_too=False)
+    assert (tmp_path / "viewer.md").read_text() == text
+    rows = [ln for ln in text.splitlines() if ln.startswith("| 5x5x9") or ln.startswith("| 9x9x17")]
+    assert len(rows) == 2, text
+    for row in rows:
+        cells = [c.strip() for c in row.strip("|").split("|")]
+        redraw_fps = float(cells[8])
+        assert redraw_fps > 0, row
+    quick = [c.strip() for c in rows[1].strip("|").split("|")]
+    assert int(quick[2]) > 0, "the quick-cut session must show cut faces"

@@ -1,0 +1,122 @@
+"""Reading electrodes back over REST (GET .../electrodes[/{name}]) against a live server: what
+the scene, its path and schedule, PATCH and stream controls make of each electrode."""
+
+from __future__ import annotations
+
+import json
+
+import httpx
+import pytest
+from websockets.sync.client import connect
+
+from diathermy.engine.electrodes import path_position
+from diathermy.scene import builtin_scene
+from diathermy.service.encoding import unpack
+from tests.service.conftest import CUT, SMALL, TOKEN_A, TOKEN_B, LiveServer
+
+
+def one(api: httpx.Client, sid: str, name: str = "active") -> dict:
+    r = api.get(f"/v1/sessions/{sid}/electrodes/{name}")
+    assert r.status_code == 200, r.text
+    return r.json()
+
+
+def test_electrode_reads_back_scene_and_controls(live: LiveServer, api: httpx.Client) -> None:
+    sid = api.post("/v1/sessions", json=SMALL).json()["id"]
+    listed = api.get(f"/v1/sessions/{sid}/electrodes").json()["electrodes"]
+    assert listed == [
+        {
+            "name": "active",
+            "position_m": [0.1, 0.05],
+            "radius_m": 0.00117,
+            "drive": "power",
+            "power_w": 50.0,
+            "current_density_a_per_m2": 57200.0,
+            "active": True,
+            "follows_path": False,
+            "control_id": 0,
+            "step": 0,
+            "time_s": 0.0,
+        }
+    ]
+    assert one(api, sid) == listed[0]
+
+    ack = api.patch(
+        f"/v1/sessions/{sid}/electrodes/active",
+        json={"position_m": [0.05, 0.04], "power_w": 20.0, "active": False},
+    ).json()
+    e = one(api, sid)
+    assert e["position_m"] == [0.05, 0.04] and e["power_w"] == 20.0 and e["active"] is False
+    assert e["control_id"] == ack["control_id"] == 1
+
+    api.patch(f"/v1/sessions/{sid}/electrodes/active", json={"current_density_a_per_m2": 1e4})
+    api.post(f"/v1/sessions/{sid}/step", json={"n": 2})
+    e = one(api, sid)
+    assert e["drive"] == "current_density" and e["current_density_a_per_m2"] == 1e4
+    assert e["position_m"] == [0.05, 0.04] and e["active"] is False  # earlier changes stay
+    assert e["step"] == 2 and e["time_s"] == pytest.approx(0.06)
+
+    # a control on the stream is read back the same way, once acknowledged
+    with connect(
+        f"{live.ws_url}/v1/sessions/{sid}/stream",
+        additional_headers={"Authorization": f"Bearer {TOKEN_A}"},
+        open_timeout=10,
+    ) as ws:
+        assert unpack(ws.recv(timeout=10))["type"] == "hello"
+        ws.send(json.dumps({"type": "electrode", "position_m": [0.12, 0.03], "active": True}))
+        while (msg := unpack(ws.recv(timeout=10)))["type"] != "ack":
+            pass
+    e = one(api, sid)
+    assert e["position_m"] == [0.12, 0.03] and e["active"] is True
+    assert e["control_id"] == msg["control_id"] == 3
+
+
+def test_path_and_schedule_follow_the_session_time(api: httpx.Client) -> None:
+    sid = api.post("/v1/sessions", json={"builtin": "moving-electrode", "grid": [5, 5, 9]}).json()[
+        "id"
+    ]
+    path = builtin_scene("moving-electrode").electrodes[0].path
+    assert path is not None
+    e0 = one(api, sid)
+    assert e0["follows_path"] is True and e0["position_m"] == pytest.approx([0.04, 0.05])
+    api.post(f"/v1/sessions/{sid}/step", json={"n": 10})
+    e1 = one(api, sid)
+    assert e1["position_m"] == pytest.approx(list(path_position(path, e1["time_s"])))
+    assert e1["position_m"][0] > 0.04 + 0.003  # 0.3 s at 12.35 mm/s along the path
+    api.patch(f"/v1/sessions/{sid}/electrodes/active", json={"position_m": [0.1, 0.05]})
+    api.post(f"/v1/sessions/{sid}/step", json={"n": 2})
+    e2 = one(api, sid)
+    assert e2["follows_path"] is False and e2["position_m"] == [0.1, 0.05]
+
+    scene = {
+        **CUT["scene"],
+        "electrodes": [
+            {"name": "a", "position_m": [0.005, 0.005], "schedule_s": [[0.0, 0.05]]},
+            {"name": "b", "position_m": [0.015, 0.005], "active": False},
+        ],
+    }
+    sid = api.post("/v1/sessions", json={"scene": scene}).json()["id"]
+    states = api.get(f"/v1/sessions/{sid}/electrodes").json()["electrodes"]
+    assert [(s["name"], s["active"]) for s in states] == [("a", True), ("b", False)]
+    api.post(f"/v1/sessions/{sid}/step", json={"n": 2})  # t = 0.06 s: past a's schedule
+    assert one(api, sid, "a")["active"] is False
+    assert one(api, sid, "b")["position_m"] == [0.015, 0.005]
+
+
+def test_electrode_errors_name_the_field(live: LiveServer, api: httpx.Client) -> None:
+    sid = api.post("/v1/sessions", json=SMALL).json()["id"]
+    r = api.get(f"/v1/sessions/{sid}/electrodes/nope")
+    assert r.status_code == 404
+    assert r.json() == {
+        "error": "not_found",
+        "message": "no electrode 'nope'; electrodes: active",
+        "field": "name",
+    }
+    r = api.get(f"/v1/sessions/{sid}/electrodes/{'x' * 129}")
+    assert r.status_code == 422 and r.json()["field"] == "path.name"
+    assert api.get("/v1/sessions/missing/electrodes").status_code == 404
+    with live.client(TOKEN_B) as other:
+        assert other.get(f"/v1/sessions/{sid}/electrodes").status_code == 404
+        assert other.get(f"/v1/sessions/{sid}/electrodes/active").status_code == 404
+    with live.client(None) as anonymous:
+        assert anonymous.get(f"/v1/sessions/{sid}/electrodes").status_code == 401
