@@ -14,6 +14,7 @@ Writes ``benchmarks/results/effects.md`` and ``effects.png`` (stacked bars).
 from __future__ import annotations
 
 import argparse
+import copy
 import resource
 import sys
 import time
@@ -58,11 +59,7 @@ def with_effects(base: Simulation, effects: list[str]) -> Simulation:
     """A simulation of ``effects`` starting from ``base``'s state."""
     scene = base.scene.model_copy(update={"effects": effects})
     sim = Simulation(scene)
-    st, bs = sim.state, base.state
-    st.step, st.time_s = bs.step, bs.time_s
-    st.arrays = {k: v.copy() for k, v in bs.arrays.items()}
-    st.energy_j = dict(bs.energy_j)
-    st.overrides = dict(bs.overrides)
+    sim.state = copy.deepcopy(base.state)
     sim.restore_solver_state({}, steps_since_reinit=0, mechanics_current=False)
     return sim
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -55,6 +56,8 @@ def resolve_scene(ref: str | None) -> Scene:
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
     from diathermy.engine.run import run_scene  # heavy imports only when simulating
+    from diathermy.report.budget import resolve_accuracy_budget
+    from diathermy.worker.registry import RegistryModels
 
     data = resolve_scene(args.scene).model_dump()
     if args.grid is not None:
@@ -69,9 +72,10 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         data["mechanics"]["guard_tolerance"] = args.guard
     if args.correction is not None:
         data["mechanics"]["correction"] = args.correction
-    scene = scene_from_dict(data)
+    scene = resolve_accuracy_budget(scene_from_dict(data))
     summary = run_scene(
         scene,
+        models=RegistryModels(os.environ.get("DIATHERMY_DATA_DIR", "diathermy-data")),
         out=Path(args.out),
         vtu_dir=Path(args.vtu) if args.vtu else None,
         every=args.every,

@@ -97,8 +97,8 @@ def test_cut_happens_and_electrode_follows_crater():
     assert cut[-1] > 0 and all(b >= a for a, b in zip(cut, cut[1:], strict=False))  # irreversible
     depth = reports[-1].crater_depth_m
     assert 0 < depth < 0.01
-    (key,) = sim._contacts
-    assert key[2] < sim.top_z  # the contact disk sits on the crater floor, not the old top
+    (key,) = sim.ctx.contacts.entries
+    assert key[2] < sim.ctx.top_z  # the contact disk sits on the crater floor, not the old top
 
 
 def test_checkpoint_restore_continues_bit_for_bit(tmp_path):
@@ -112,7 +112,7 @@ def test_checkpoint_restore_continues_bit_for_bit(tmp_path):
     back.run(8)
     for name, arr in sim.state.arrays.items():
         assert np.array_equal(arr, back.state.arrays[name]), name
-    assert sim.state.energy_j == back.state.energy_j
+    assert sim.state.energy == back.state.energy
 
 
 def test_bad_checkpoints_get_clear_errors(tmp_path):

@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+import numpy as np
+
 from diathermy.errors import SceneError
 
 
@@ -85,3 +87,13 @@ class Tissue:
         if self.pore_stiffness == "bulk":
             return self.bulk_modulus_pa
         return 4.0 * self.shear_modulus_pa / 3.0
+
+
+def ersatz_youngs_modulus(
+    healthy: np.ndarray, youngs_modulus_pa: float, ersatz_ratio: float
+) -> np.ndarray:
+    """E per tet in Pa: the tissue's where healthy, the ersatz ratio E of removed tissue elsewhere.
+
+    The one place of the ersatz-material rule (removed tets stay in the mesh, nearly void).
+    """
+    return np.where(healthy, youngs_modulus_pa, ersatz_ratio * youngs_modulus_pa)
