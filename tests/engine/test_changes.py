@@ -59,7 +59,9 @@ def test_changes_are_exact_through_boiling_and_the_cut():
 
 def test_a_moving_electrode_moves_the_contact():
     path = ElectrodePath(waypoints_m=[(0.005, 0.005), (0.015, 0.005)], speed_m_per_s=0.002)
-    sim = Simulation(tiny_scene(electrodes=[Electrode(position_m=(0.005, 0.005), path=path, power_w=5.0)]))
+    sim = Simulation(
+        tiny_scene(electrodes=[Electrode(position_m=(0.005, 0.005), path=path, power_w=5.0)])
+    )
     moved = []
     for _ in range(5):
         before = {k: v.copy() for k, v in sim.state.arrays.items()}
