@@ -66,11 +66,6 @@ class EngineContext:
     def mechanics(self, backend: MechanicsBackend) -> None:
         self._mechanics = backend
 
-    @property
-    def mechanics_built(self) -> bool:
-        """Whether the mechanics backend exists yet."""
-        return self._mechanics is not None
-
     @cached_property
     def incidence(self) -> sp.csr_matrix:
         """Node-tet volume incidence of the mesh, built on the first cut."""

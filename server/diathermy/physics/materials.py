@@ -76,12 +76,6 @@ class Tissue:
         return self.youngs_modulus_pa / (2.0 * (1.0 + self.poisson_ratio))
 
     @property
-    def lame_lambda_pa(self) -> float:
-        """lambda = E nu / ((1 + nu)(1 - 2 nu))."""
-        E, nu = self.youngs_modulus_pa, self.poisson_ratio
-        return E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
-
-    @property
     def pore_modulus_pa(self) -> float:
         """K_m, the stiffness confining a micropore: K by default, 4G/3 as an option."""
         if self.pore_stiffness == "bulk":
