@@ -1,7 +1,7 @@
 """Cost per step of each effect of the default scene, effect set by effect set (one command).
 
     python benchmarks/effects.py [--grid NZ NY NX] [--steps N] [--checkpoint PATH]
-        [--compare OLD_SERVER_DIR]
+        [--compare OLD_SERVER_DIR [--rounds N]]
 
 Five effect sets, each a superset of the last: electric; + thermal; + vaporization;
 + mechanics; + dissection. Every set starts from the same state, taken in the regime where
@@ -9,9 +9,11 @@ every effect works (boiling, pressure, strain energy above kappa, a growing cut)
 checkpoint ``benchmarks/paper_scenes.py`` leaves in ``runs/`` when it exists, else a warm-up
 run of the scene until the cut moves (saved to that path, so later runs start from it). Each
 set then runs ``--steps`` steps; the per-effect wall times of the step reports give medians
-per effect and each effect's share of the step. ``--compare DIR`` first measures the same
-sets with another source tree's ``server/`` directory (e.g. the main checkout, before a
-change) in a subprocess, from the same checkpoint, and adds its step times and the ratios.
+per effect and each effect's share of the step. ``--compare DIR`` also measures the same sets
+with another source tree's ``server/`` directory (e.g. the main checkout, before a change),
+from the same checkpoint: ``--rounds`` times each, alternating (other tree first, each in its
+own process), and reports the fastest round of each tree per set (the least disturbed by other
+load on a shared machine) and their ratio.
 Writes ``benchmarks/results/effects.md`` and ``effects.png`` (stacked bars).
 """
 
@@ -92,8 +94,8 @@ def measure(grid: tuple[int, int, int], steps: int, checkpoint: Path) -> dict[st
     return {"origin": origin, "rows": rows, "rss_mb": rss}
 
 
-def measure_other(server: Path, grid: tuple[int, int, int], steps: int, ckpt: Path) -> dict:
-    """``measure`` with another source tree, in a subprocess."""
+def measure_tree(server: Path, grid: tuple[int, int, int], steps: int, ckpt: Path) -> dict:
+    """``measure`` with the source tree ``server``, in a subprocess."""
     out = RESULTS / "_effects_other.json"
     args = [sys.executable, __file__, "--grid", *map(str, grid), "--steps", str(steps)]
     args += ["--checkpoint", str(ckpt), "--json", str(out)]
@@ -110,7 +112,8 @@ def main() -> None:
     ap.add_argument(
         "--checkpoint", type=Path, default=ROOT / "runs" / "paper_scenes_fixed-electrode.h5"
     )
-    ap.add_argument("--compare", type=Path, help="another tree's server/ dir to measure first")
+    ap.add_argument("--compare", type=Path, help="another tree's server/ dir to measure too")
+    ap.add_argument("--rounds", type=int, default=3, help="alternating rounds with --compare")
     ap.add_argument("--json", type=Path, help=argparse.SUPPRESS)  # --compare's subprocess
     a = ap.parse_args()
     configure_threads()
@@ -118,18 +121,37 @@ def main() -> None:
     if a.json is not None:
         a.json.write_text(json.dumps(measure(grid, a.steps, a.checkpoint)))
         return
-    if a.compare is not None and not a.checkpoint.exists():
+    if a.compare is None:
+        write_results(measure(grid, a.steps, a.checkpoint), None, a, grid)
+        return
+    if not a.checkpoint.exists():
         start_state(grid, a.checkpoint)  # both trees start from the same saved state
-    other = measure_other(a.compare, grid, a.steps, a.checkpoint) if a.compare else None
-    res = measure(grid, a.steps, a.checkpoint)
-    write_results(res, other, a, grid)
+    this = Path(os.environ.get("BENCH_SERVER", str(ROOT / "server")))
+    before, after = [], []
+    for _ in range(a.rounds):
+        before.append(measure_tree(a.compare, grid, a.steps, a.checkpoint))
+        after.append(measure_tree(this, grid, a.steps, a.checkpoint))
+    write_results(fastest(after), fastest(before), a, grid)
+
+
+def fastest(runs: list[dict]) -> dict:
+    """Per effect set, the round with the smallest median step time (its per-effect times too);
+    ``rounds`` keeps every round's step times."""
+    out = dict(runs[0])
+    out["rows"] = [
+        min((run["rows"][i] for run in runs), key=lambda r: r["step"])
+        for i in range(len(runs[0]["rows"]))
+    ]
+    out["rounds"] = [[r["step"] for r in run["rows"]] for run in runs]
+    out["rss_mb"] = max(run["rss_mb"] for run in runs)
+    return out
 
 
 def write_results(res: dict, other: dict | None, a: argparse.Namespace, grid: tuple) -> None:
     rows, effects = res["rows"], SETS[-1]
     cmd = f"python benchmarks/effects.py --grid {' '.join(map(str, grid))} --steps {a.steps}"
     if other is not None:
-        cmd += f" --compare {a.compare}"
+        cmd += f" --compare {a.compare} --rounds {a.rounds}"
     lines = [
         "# Cost per step by effect (default scene)",
         "",
@@ -166,7 +188,11 @@ def write_results(res: dict, other: dict | None, a: argparse.Namespace, grid: tu
     if other is not None:
         lines += [
             "",
-            f"## Side by side with `{a.compare}` (measured first, same start state)",
+            f"## Side by side: before = `{a.compare}`, after = this tree",
+            "",
+            f"Same start state; {a.rounds} rounds, alternating (before first), each tree in its "
+            "own process. The tables above and below take, per effect set, the round with the "
+            "fastest median step of each tree; all rounds' medians are listed after.",
             "",
             "| effect set | step before (s) | step after (s) | after / before |",
             "|---|---|---|---|",
@@ -176,6 +202,12 @@ def write_results(res: dict, other: dict | None, a: argparse.Namespace, grid: tu
             lines.append(
                 f"| {after['label']} | {before['step']:.4f} | {after['step']:.4f} | {ratio:.2f} |"
             )
+        lines += ["", "| effect set | before, every round (s) | after, every round (s) |"]
+        lines += ["|---|---|---|"]
+        for i, label in enumerate(LABELS):
+            b = ", ".join(f"{run[i]:.4f}" for run in other["rounds"])
+            f = ", ".join(f"{run[i]:.4f}" for run in res["rounds"])
+            lines.append(f"| {label} | {b} | {f} |")
     lines += ["", "![effects](effects.png)", ""]
     RESULTS.mkdir(parents=True, exist_ok=True)
     (RESULTS / "effects.md").write_text("\n".join(lines))

@@ -78,3 +78,28 @@ def field_changes(
         if name == "removed":
             removed = idx[new[idx] & ~old[idx]]
     return ChangeSet(nodes=nodes, tets=tets, removed_tets=removed, contact_moved=contact_moved)
+
+
+class PendingChanges:
+    """A change set computed on first use from the arrays a step replaced: before (the arrays
+    the fields held) and after (the arrays put in their place). Steps replace arrays and never
+    write into them, so this stays exact while nobody writes into the state's arrays."""
+
+    def __init__(
+        self,
+        before: dict[str, np.ndarray],
+        after: dict[str, np.ndarray],
+        *,
+        contact_moved: bool = False,
+    ) -> None:
+        self.before, self.after, self.contact_moved = before, after, contact_moved
+        self._resolved: ChangeSet | None = None
+
+    def resolve(self) -> ChangeSet:
+        """The change set (computed once)."""
+        if self._resolved is None:
+            self._resolved = field_changes(
+                self.before, self.after, contact_moved=self.contact_moved
+            )
+            self.before, self.after = {}, {}  # let the replaced arrays go
+        return self._resolved

@@ -13,9 +13,10 @@ from diathermy.engine.discretization import Discretization, build_discretization
 from diathermy.fem.edges import edge_stiffness
 from diathermy.physics.electric import DrivenPotential, PotentialSolver
 from diathermy.physics.electrothermal import ElectroThermal
+from diathermy.physics.heat_operator import heat_mesh
 from diathermy.physics.levelset import volume_incidence
 from diathermy.physics.mechanics_backend import MechanicsBackend
-from diathermy.physics.thermal import HeatStepper, heat_mesh
+from diathermy.physics.thermal import HeatStepper
 from diathermy.physics.tissue_effects import ArrheniusDamage, ConductivityLaw
 from diathermy.scene import Scene
 

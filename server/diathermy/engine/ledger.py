@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from diathermy.physics.thermal import HeatEnergy
+from diathermy.physics.heat_operator import HeatEnergy
 
 
 @dataclass

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from diathermy.engine.changes import ChangeSet, field_changes
+from diathermy.engine.changes import ChangeSet, PendingChanges
 from diathermy.engine.context import EngineContext
 from diathermy.engine.effects import EFFECTS
 from diathermy.engine.electrodes import electrode_pose
@@ -28,11 +28,21 @@ from diathermy.engine.step import Outcome, Step
 
 @dataclass(frozen=True)
 class StepResult:
-    """A step's report, what it changed in all, and what each effect changed."""
+    """A step's report, and what it changed in all and per effect (computed on first use)."""
 
     report: StepReport
-    changes: ChangeSet
-    by_effect: dict[str, ChangeSet]
+    pending: PendingChanges
+    pending_by_effect: dict[str, PendingChanges]
+
+    @property
+    def changes(self) -> ChangeSet:
+        """What the step changed."""
+        return self.pending.resolve()
+
+    @property
+    def by_effect(self) -> dict[str, ChangeSet]:
+        """What each effect changed."""
+        return {name: p.resolve() for name, p in self.pending_by_effect.items()}
 
 
 def begin_step(ctx: EngineContext, state: SimulationState) -> Step:
@@ -43,10 +53,11 @@ def begin_step(ctx: EngineContext, state: SimulationState) -> Step:
     return Step(dt=dt, poses=poses, T_old=state["temperature"].copy())
 
 
-def apply_outcome(state: SimulationState, step: Step, outcome: Outcome) -> ChangeSet:
+def apply_outcome(state: SimulationState, step: Step, outcome: Outcome) -> PendingChanges:
     """Put an effect's outcome into the state and the step; returns what it changed."""
     moved = "contacts" in outcome.memory and outcome.memory["contacts"] != state.memory.contacts
-    changes = field_changes(state.arrays, outcome.fields, contact_moved=moved)
+    before = {name: state.arrays[name] for name in outcome.fields}
+    changes = PendingChanges(before, dict(outcome.fields), contact_moved=moved)
     state.arrays.update(outcome.fields)
     if outcome.heat is not None:
         state.energy.add_heat(outcome.heat)
@@ -67,7 +78,7 @@ def run_step(ctx: EngineContext, state: SimulationState, calls: Counter[str]) ->
     step = begin_step(ctx, state)
     rep = StepReport(step=state.step + 1, time_s=state.time_s + step.dt)
     start, contacts_before = dict(state.arrays), state.memory.contacts
-    by_effect: dict[str, ChangeSet] = {}
+    by_effect: dict[str, PendingChanges] = {}
     for name in ctx.effects:
         effect = EFFECTS[name]
         t0 = time.perf_counter()
@@ -82,8 +93,11 @@ def run_step(ctx: EngineContext, state: SimulationState, calls: Counter[str]) ->
     state.time_s = state.step * step.dt  # no drift from summing dt
     rep.delivered_power_w = step.delivered_power_w
     finish_report(rep, state)
-    changes = field_changes(
-        start, state.arrays, contact_moved=state.memory.contacts != contacts_before
+    replaced = {k: v for k, v in state.arrays.items() if v is not start[k]}
+    changes = PendingChanges(
+        {k: start[k] for k in replaced},
+        replaced,
+        contact_moved=state.memory.contacts != contacts_before,
     )
     rep.wall_s = time.perf_counter() - t_start
     return StepResult(rep, changes, by_effect)

@@ -21,7 +21,7 @@ from diathermy.engine.changes import ChangeSet
 from diathermy.engine.context import EngineContext
 from diathermy.engine.discretization import Discretization
 from diathermy.engine.electrodes import ElectrodeOverride, electrode_pose, override_electrode
-from diathermy.engine.pipeline import run_step
+from diathermy.engine.pipeline import StepResult, run_step
 from diathermy.engine.report import StepReport
 from diathermy.engine.state import SimulationState, initial_state
 from diathermy.errors import SceneError
@@ -60,8 +60,7 @@ class Simulation:
         self.state["level_set"] = initial_level_set(disc.grid).ravel().copy()
         self.calls: Counter[str] = Counter()
         self.last_report: StepReport | None = None
-        self.last_changes: ChangeSet | None = None
-        self.last_effect_changes: dict[str, ChangeSet] = {}
+        self._last_result: StepResult | None = None
         if mechanics_backend is not None:
             self.ctx.mechanics = mechanics_backend
         elif scene.mechanics.backend != "fem" and self.ctx.has("mechanics"):
@@ -116,6 +115,16 @@ class Simulation:
     @topology.setter
     def topology(self, value: Topology | None) -> None:
         self.state.memory.topology = value
+
+    @property
+    def last_changes(self) -> ChangeSet | None:
+        """What the last step changed (None before the first step); computed on first use."""
+        return None if self._last_result is None else self._last_result.changes
+
+    @property
+    def last_effect_changes(self) -> dict[str, ChangeSet]:
+        """What each effect of the last step changed."""
+        return {} if self._last_result is None else self._last_result.by_effect
 
     @property
     def mechanics(self) -> MechanicsBackend:
@@ -177,8 +186,7 @@ class Simulation:
         What the step changed is in ``last_changes`` (per effect: ``last_effect_changes``)."""
         result = run_step(self.ctx, self.state, self.calls)
         self.last_report = result.report
-        self.last_changes = result.changes
-        self.last_effect_changes = result.by_effect
+        self._last_result = result
         return result.report
 
     def run(self, n: int, callback: Callable[[StepReport], None] | None = None) -> list[StepReport]:

@@ -11,7 +11,7 @@ import numpy as np
 from diathermy.engine.electrodes import ElectrodePose
 from diathermy.engine.report import EffectReport
 from diathermy.physics.electric import ContactWeights, ElectrodeDrive
-from diathermy.physics.thermal import HeatEnergy
+from diathermy.physics.heat_operator import HeatEnergy
 
 
 @dataclass(frozen=True)
