@@ -44,7 +44,9 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         data["mechanics"]["guard_tolerance"] = args.guard
     if args.correction is not None:
         data["mechanics"]["correction"] = args.correction
-    scene = resolve_accuracy_budget(scene_from_dict(data))
+    scene = resolve_accuracy_budget(
+        scene_from_dict(data), os.environ.get("DIATHERMY_ACCURACY_REPORT")
+    )
     summary = run_scene(
         scene,
         models=RegistryModels(os.environ.get("DIATHERMY_DATA_DIR", "diathermy-data")),

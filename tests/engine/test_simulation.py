@@ -9,7 +9,7 @@ import pytest
 
 from diathermy.engine.simulation import Simulation
 from diathermy.errors import CheckpointError, SceneError
-from diathermy.scene import Electrode
+from diathermy.scene import AccuracyBudget, Electrode
 
 from .scenes import tiny_scene
 
@@ -177,3 +177,14 @@ def test_monolithic_coupling_matches_staggered():
     dT = stag.state["temperature"] - stag.tissue.t_initial_k
     assert np.max(np.abs(mono.state["temperature"] - stag.state["temperature"])) <= 1e-6 * dT.max()
     assert abs(mono.last_report.energy["imbalance"]) <= 1e-6 * mono.last_report.energy["joule_in"]
+
+
+def test_policy_is_the_callers():
+    """An unresolved accuracy budget and a registry model name without a registry are refused
+    with errors naming the field: the engine reads no report, registry or variable itself."""
+    budgeted = tiny_scene(accuracy_budget=AccuracyBudget(max_strain_energy_error=0.02))
+    with pytest.raises(SceneError, match="accuracy_budget"):
+        Simulation(budgeted)
+    named = tiny_scene(mechanics={"backend": "cnn", "model": "some-registry-name:3"})
+    with pytest.raises(SceneError, match=r"mechanics\.model.*no model registry"):
+        Simulation(named)

@@ -6,6 +6,7 @@ accuracy report) and the model registry of its data directory.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -40,7 +41,8 @@ class DefaultEngine:
         from diathermy.engine.simulation import Simulation
         from diathermy.report.budget import resolve_accuracy_budget
 
-        return Simulation(resolve_accuracy_budget(scene), models=self._models())
+        report = os.environ.get("DIATHERMY_ACCURACY_REPORT")
+        return Simulation(resolve_accuracy_budget(scene, report), models=self._models())
 
     def load(self, path: Path) -> Any:
         from diathermy.engine.simulation import Simulation
