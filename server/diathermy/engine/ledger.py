@@ -55,8 +55,8 @@ class EnergyLedger:
 
 
 def latent_heat_moved_j(
-    node_volumes_m3: np.ndarray, x_old: np.ndarray, x_new: np.ndarray, latent_per_m3: np.ndarray
+    node_volumes_m3: np.ndarray, x_old: np.ndarray, x_new: np.ndarray, latent_per_m3: float
 ) -> float:
     """Heat in J moved into the latent store when the vapor fraction goes from x_old to x_new,
-    with ``latent_per_m3`` the latent heat of all the water of a node per volume (J/m^3)."""
+    with ``latent_per_m3`` the latent heat of all the water per volume (J/m^3, ``m_w h_fg``)."""
     return float(np.dot(node_volumes_m3, latent_per_m3 * (x_new - x_old)))
