@@ -25,9 +25,9 @@ from pathlib import Path
 import h5py
 from threadpoolctl import threadpool_limits
 
-from diathermy.cli import parse_grid
 from diathermy.datagen import DatagenConfig, generate, run_scenario
 from diathermy.datagen.physics import fem_physics
+from diathermy.scene import parse_grid
 
 PAPER_SAMPLES = 200_000
 PAPER_GRID = (64, 64, 128)

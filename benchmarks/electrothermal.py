@@ -48,7 +48,8 @@ from diathermy.physics.electric import (
     joule_heat,
 )
 from diathermy.physics.electrothermal import ElectroThermal
-from diathermy.physics.thermal import HeatStepper, assemble_heat_operator, heat_mesh
+from diathermy.physics.heat_operator import assemble_heat_operator, heat_mesh  # noqa: E402
+from diathermy.physics.thermal import HeatStepper
 
 try:  # not a dependency of the package; without it BLAS keeps its default threads
     from threadpoolctl import threadpool_limits

@@ -245,7 +245,7 @@ def run_scene(
         ersatz_ratio=tis.ersatz_stiffness_ratio,
     )
     rec = Recorder(ref, fem, model, modes, policies, enrich_modes, indicator_iters)
-    sim._mechanics = rec  # the recorder is the FEM backend plus bookkeeping
+    sim.mechanics = rec  # the recorder is the FEM backend plus bookkeeping
     ref.append(sim)
     step_s = []
     t0 = time.perf_counter()

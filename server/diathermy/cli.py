@@ -8,53 +8,28 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from diathermy.errors import DiathermyError, SceneError
+from diathermy.errors import DiathermyError
 from diathermy.runtime import configure_threads
 from diathermy.scene import (
-    Scene,
     builtin_scene,
     builtin_scene_names,
-    load_scene,
+    parse_grid,
+    resolve_scene,
     scene_from_dict,
     scene_json_schema,
 )
 from diathermy.version import __version__
 
 
-def parse_grid(text: str) -> tuple[int, int, int]:
-    """``NZxNYxNX`` -> (nz, ny, nx)."""
-    parts = text.lower().split("x")
-    try:
-        nz, ny, nx = (int(p) for p in parts)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"grid must look like 33x33x65 (nodes z, y, x), got {text!r}"
-        ) from None
-    if min(nz, ny, nx) < 3:
-        raise argparse.ArgumentTypeError(f"every node count must be >= 3, got {text!r}")
-    return nz, ny, nx
-
-
-def resolve_scene(ref: str | None) -> Scene:
-    """A built-in scene name, a path to a JSON/YAML scene file, or the default scene."""
-    if ref is None:
-        return builtin_scene("default")
-    if ref in builtin_scene_names():
-        return builtin_scene(ref)
-    path = Path(ref)
-    if path.suffix.lower() in {".json", ".yaml", ".yml"} or path.exists():
-        return load_scene(path)
-    raise SceneError(
-        f"{ref!r} is neither a built-in scene ({', '.join(builtin_scene_names())}) nor a scene file"
-    )
-
-
 def _cmd_simulate(args: argparse.Namespace) -> int:
     from diathermy.engine.run import run_scene  # heavy imports only when simulating
+    from diathermy.report.budget import resolve_accuracy_budget
+    from diathermy.worker.registry import RegistryModels
 
     data = resolve_scene(args.scene).model_dump()
     if args.grid is not None:
@@ -69,9 +44,12 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         data["mechanics"]["guard_tolerance"] = args.guard
     if args.correction is not None:
         data["mechanics"]["correction"] = args.correction
-    scene = scene_from_dict(data)
+    scene = resolve_accuracy_budget(
+        scene_from_dict(data), os.environ.get("DIATHERMY_ACCURACY_REPORT")
+    )
     summary = run_scene(
         scene,
+        models=RegistryModels(os.environ.get("DIATHERMY_DATA_DIR", "diathermy-data")),
         out=Path(args.out),
         vtu_dir=Path(args.vtu) if args.vtu else None,
         every=args.every,

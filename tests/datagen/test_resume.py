@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from diathermy.datagen import DatagenConfig, DatasetReader, DatasetWriter, generate
-from diathermy.datagen.generate import compute_shard, shard_dir_for
+from diathermy.datagen.generate import shard_dir_for
+from diathermy.datagen.runners import compute_shard
 from diathermy.datagen.scenario import run_scenario
 from diathermy.datagen.storage import _append_rows
 from diathermy.errors import CheckpointError

@@ -90,7 +90,7 @@ def test_electrode_on_an_edge_and_on_a_corner(where):
     electrode the contact ends (power 0) instead of dividing by a zero resistance."""
     sim = Simulation(tiny_scene(electrodes=[Electrode(position_m=where, power_w=30.0)]))
     reports = run_sane(sim, 1)
-    (contact,) = sim._contacts.values()
+    (contact,) = sim.ctx.contacts.entries.values()
     share = 0.5 if where[1] > 0 else 0.25  # the disk's part on the block
     assert contact.area_m2 == pytest.approx(share * np.pi * 1.17e-3**2, rel=1e-9)
     reports += run_sane(sim, 39)
@@ -179,7 +179,7 @@ def test_cells_larger_than_the_electrode():
     delivered, and 300 steps of all effects stay bounded."""
     sim = Simulation(Scene(grid=(5, 5, 9), steps=300))
     reports = run_sane(sim, 300)
-    (contact,) = sim._contacts.values()
+    (contact,) = sim.ctx.contacts.entries.values()
     assert contact.area_m2 == pytest.approx(np.pi * 1.17e-3**2, rel=1e-12)
     assert all(r.delivered_power_w == pytest.approx(50.0, rel=1e-9) for r in reports)
     assert reports[-1].energy["joule_in"] == pytest.approx(50.0 * 300 * 0.03, rel=1e-9)
@@ -223,7 +223,7 @@ def test_a_cut_that_frees_a_fragment():
     loose = cut_out_a_fragment(sim)
     assert loose.sum() > 100
     reports = run_sane(sim, 1)
-    ((_, _, z_contact, _),) = sim._contacts  # on the floor under the bar, not on its top
+    ((_, _, z_contact, _),) = sim.ctx.contacts.entries  # on the floor under the bar, not on its top
     assert 0.0 < z_contact <= 0.00375 + 1e-9
     assert reports[0].delivered_power_w == pytest.approx(30.0, rel=1e-9)
     reports += run_sane(sim, 39)
@@ -281,7 +281,7 @@ def test_zero_power_for_100_steps_after_heating():
     assert sim.state["temperature"].max() < sim.tissue.t_boil_k
     frozen = {k: v.copy() for k, v in sim.state.arrays.items() if k != "temperature"}
     calls = dict(sim.calls)
-    joule = sim.state.energy_j["joule_in"]
+    joule = sim.state.energy.joule_in
     sim.set_electrode("active", power_w=0.0)
     prev_max = sim.state["temperature"].max()
     for _ in range(100):
@@ -299,5 +299,5 @@ def test_zero_power_for_100_steps_after_heating():
     assert {k: sim.calls[k] for k in calls if k != "thermal"} == {
         k: v for k, v in calls.items() if k != "thermal"
     }
-    assert sim.state.energy_j["joule_in"] == joule
+    assert sim.state.energy.joule_in == joule
     assert sim.state["temperature"].min() >= sim.tissue.t_ambient_k

@@ -9,7 +9,7 @@ import pytest
 
 from diathermy.engine.simulation import Simulation
 from diathermy.errors import CheckpointError, SceneError
-from diathermy.scene import Electrode
+from diathermy.scene import AccuracyBudget, Electrode
 
 from .scenes import tiny_scene
 
@@ -97,8 +97,8 @@ def test_cut_happens_and_electrode_follows_crater():
     assert cut[-1] > 0 and all(b >= a for a, b in zip(cut, cut[1:], strict=False))  # irreversible
     depth = reports[-1].crater_depth_m
     assert 0 < depth < 0.01
-    (key,) = sim._contacts
-    assert key[2] < sim.top_z  # the contact disk sits on the crater floor, not the old top
+    (key,) = sim.ctx.contacts.entries
+    assert key[2] < sim.ctx.top_z  # the contact disk sits on the crater floor, not the old top
 
 
 def test_checkpoint_restore_continues_bit_for_bit(tmp_path):
@@ -112,7 +112,7 @@ def test_checkpoint_restore_continues_bit_for_bit(tmp_path):
     back.run(8)
     for name, arr in sim.state.arrays.items():
         assert np.array_equal(arr, back.state.arrays[name]), name
-    assert sim.state.energy_j == back.state.energy_j
+    assert sim.state.energy == back.state.energy
 
 
 def test_bad_checkpoints_get_clear_errors(tmp_path):
@@ -177,3 +177,14 @@ def test_monolithic_coupling_matches_staggered():
     dT = stag.state["temperature"] - stag.tissue.t_initial_k
     assert np.max(np.abs(mono.state["temperature"] - stag.state["temperature"])) <= 1e-6 * dT.max()
     assert abs(mono.last_report.energy["imbalance"]) <= 1e-6 * mono.last_report.energy["joule_in"]
+
+
+def test_policy_is_the_callers():
+    """An unresolved accuracy budget and a registry model name without a registry are refused
+    with errors naming the field: the engine reads no report, registry or variable itself."""
+    budgeted = tiny_scene(accuracy_budget=AccuracyBudget(max_strain_energy_error=0.02))
+    with pytest.raises(SceneError, match="accuracy_budget"):
+        Simulation(budgeted)
+    named = tiny_scene(mechanics={"backend": "cnn", "model": "some-registry-name:3"})
+    with pytest.raises(SceneError, match=r"mechanics\.model.*no model registry"):
+        Simulation(named)

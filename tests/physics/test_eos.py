@@ -19,9 +19,9 @@ from diathermy.physics.eos import (
     saturation_pressure,
     temperature_for_vapor_fraction,
     vapor_density,
+    water_mass_density,
 )
 from diathermy.physics.materials import Tissue
-from diathermy.physics.properties import water_mass_density
 
 TISSUE = Tissue()
 SOFT = Tissue(pore_stiffness="oedometric_shear")  # K_m = 4G/3

@@ -166,7 +166,7 @@ def _local_error(mesh, u: np.ndarray, free: np.ndarray, radius_m: float) -> np.n
 
 def test_patch_correction_removes_an_error_inside_the_patch_exactly(problem) -> None:  # noqa: ANN001
     from diathermy.fem.elastic import eigenstress_load
-    from diathermy.physics.equilibrium_guard import node_graph, patch_correct, residual_patch
+    from diathermy.physics.patch_correction import node_graph, patch_correct, residual_patch
 
     mesh, geom, E, healthy, p, solver, u, free = problem
     K = solver.assembler.stiffness(E, NU)
@@ -191,7 +191,7 @@ def test_patch_correction_of_a_wider_error_solves_its_patch_and_cuts_the_energy_
     problem,  # noqa: ANN001
 ) -> None:
     from diathermy.fem.elastic import eigenstress_load
-    from diathermy.physics.equilibrium_guard import node_graph, patch_correct, residual_patch
+    from diathermy.physics.patch_correction import node_graph, patch_correct, residual_patch
 
     mesh, geom, E, healthy, p, solver, u, free = problem
     K = solver.assembler.stiffness(E, NU)
@@ -226,7 +226,7 @@ def test_patch_correction_of_a_wider_error_solves_its_patch_and_cuts_the_energy_
 
 
 def test_an_empty_patch_changes_nothing(problem) -> None:  # noqa: ANN001
-    from diathermy.physics.equilibrium_guard import node_graph, patch_correct, residual_patch
+    from diathermy.physics.patch_correction import node_graph, patch_correct, residual_patch
 
     mesh, _, E, _, _, solver, u, free = problem
     K = solver.assembler.stiffness(E, NU)
@@ -237,7 +237,7 @@ def test_an_empty_patch_changes_nothing(problem) -> None:  # noqa: ANN001
 
 
 def test_residual_patch_grows_rings_and_respects_its_cap(problem) -> None:  # noqa: ANN001
-    from diathermy.physics.equilibrium_guard import node_graph, residual_patch
+    from diathermy.physics.patch_correction import node_graph, residual_patch
 
     mesh, _, E, _, _, solver, _, _ = problem
     graph = node_graph(solver.assembler.stiffness(E, NU))
@@ -269,7 +269,7 @@ def _grid_graph(n: int) -> sp.csr_matrix:
     max_nodes=st.integers(1, 80),
 )
 def test_residual_patch_properties(values, threshold, layers, max_nodes) -> None:  # noqa: ANN001
-    from diathermy.physics.equilibrium_guard import residual_patch
+    from diathermy.physics.patch_correction import residual_patch
 
     n = len(values)
     r = np.zeros((n, 3))
@@ -288,7 +288,7 @@ def test_residual_patch_properties(values, threshold, layers, max_nodes) -> None
 
 def test_a_singular_patch_leaves_u_unchanged(problem) -> None:  # noqa: ANN001
     from diathermy.fem.elastic import eigenstress_load
-    from diathermy.physics.equilibrium_guard import node_graph, patch_correct, residual_patch
+    from diathermy.physics.patch_correction import node_graph, patch_correct, residual_patch
 
     mesh, geom, E, healthy, p, solver, u, free = problem
     E0 = np.where(healthy, E, 0.0)  # removed tissue with no stiffness at all: K_PP singular

@@ -12,7 +12,6 @@ from diathermy.errors import SolverDivergedError
 from diathermy.mesh import Grid, build_tet_mesh
 from diathermy.physics.levelset import (
     GHOST_SLOPE_CAP,
-    LevelSetParams,
     _godunov_gradient,
     _stencil,
     advance,
@@ -132,15 +131,6 @@ def test_tet_to_node_is_the_volume_weighted_mean(small_mesh, rng):
         assert np.allclose(
             fast, tet_to_node(w, mesh.tets, vol, mesh.n_nodes, include=inc), rtol=1e-13
         )
-
-
-def test_params_validate():
-    p = LevelSetParams()
-    assert p.v0_m_per_s == 5e-3 and p.cfl == 0.5
-    with pytest.raises(ValueError):
-        LevelSetParams(cfl=1.5)
-    with pytest.raises(ValueError):
-        LevelSetParams(v0_m_per_s=-1.0)
 
 
 def test_one_step_equals_the_node_by_node_twin(rng):

@@ -5,7 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from diathermy.physics.eos import equilibrium_pressure, equilibrium_vapor_fraction
+from diathermy.physics.eos import (
+    equilibrium_pressure,
+    equilibrium_vapor_fraction,
+    water_mass_density,
+)
 from diathermy.physics.materials import Tissue
 from diathermy.physics.properties import (
     effective_conductivity,
@@ -13,7 +17,6 @@ from diathermy.physics.properties import (
     effective_heat_capacity,
     nodes_to_tets,
     volumetric_heat_capacity,
-    water_mass_density,
 )
 
 TISSUE = Tissue()

@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from diathermy.fem.geometry import structured_geometry
+from diathermy.mesh import Grid, build_tet_mesh
 from diathermy.physics.materials import Tissue
 from diathermy.physics.strain_energy_error import strain_energy_error_on_grid, tet_youngs_modulus
+from diathermy.physics.topology import evaluate_topology
 
 GRID = (4, 5, 6)
 SPACING = (0.01, 0.02, 0.015)
@@ -39,11 +42,17 @@ def test_rigid_motion_has_no_energy() -> None:
     np.testing.assert_allclose(err(u, u_ref, np.zeros(GRID), np.ones(GRID)), 0.0, atol=1e-10)
 
 
-def test_cut_tets_take_the_ersatz_modulus() -> None:
+def test_cut_tets_take_the_ersatz_modulus_by_the_engines_rule() -> None:
+    """E is ersatz exactly on the tets the engine removes (half the volume cut, or loose),
+    which is not the mean-nodal-phi rule: a tet a third cut can have mean phi <= 0."""
     tissue = Tissue()
-    tets = np.array([[0, 1, 2, 3], [4, 5, 6, 7]])
-    phi = np.array([1.0, 1, 1, 1, -1, -1, -1, 0.5])
-    E = tet_youngs_modulus(phi, tets, tissue)
-    np.testing.assert_allclose(
-        E, [tissue.youngs_modulus_pa, tissue.ersatz_stiffness_ratio * tissue.youngs_modulus_pa]
-    )
+    mesh = build_tet_mesh(Grid((5, 5, 5), size_m=(0.01, 0.01, 0.01)))
+    geom = structured_geometry(mesh.points, mesh.tets, mesh.shape_id)
+    phi = np.random.default_rng(4).normal(size=mesh.n_nodes) + 0.3
+    E = tet_youngs_modulus(phi, mesh, tissue)
+    topo = evaluate_topology(phi, mesh, geom.volumes)
+    engine_removed = topo.removed | topo.loose
+    ersatz = tissue.ersatz_stiffness_ratio * tissue.youngs_modulus_pa
+    np.testing.assert_array_equal(E, np.where(engine_removed, ersatz, tissue.youngs_modulus_pa))
+    mean_rule_removed = phi[mesh.tets].mean(axis=1) <= 0
+    assert engine_removed.any() and np.any(engine_removed != mean_rule_removed)

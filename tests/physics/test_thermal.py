@@ -10,7 +10,8 @@ from diathermy.errors import SceneError
 from diathermy.fem.edges import edge_stiffness
 from diathermy.fem.geometry import structured_geometry
 from diathermy.mesh import Grid, build_tet_mesh
-from diathermy.physics.thermal import HeatStepper, assemble_heat_operator, heat_mesh
+from diathermy.physics.heat_operator import assemble_heat_operator, heat_mesh
+from diathermy.physics.thermal import HeatStepper
 
 K_TISSUE = 0.574  # W/(m K), at x = 0
 RHO_C = 1019.8 * 3441.0  # J/(m^3 K)

@@ -67,7 +67,7 @@ def test_resume_does_not_rerun(report):
     assert {p: p.stat().st_mtime_ns for p in (out / "runs").glob("*.h5")} == before
 
 
-def test_accuracy_budget_picks_cheapest_meeting_it(report, monkeypatch, tmp_path):
+def test_accuracy_budget_picks_cheapest_meeting_it(report, tmp_path):
     scene, rows, out = report
     data = {"rows": [asdict(r) for r in rows]}
     (tmp_path / "report.json").write_text(json.dumps(data))
@@ -82,9 +82,8 @@ def test_accuracy_budget_picks_cheapest_meeting_it(report, monkeypatch, tmp_path
     budgeted = tiny_scene(accuracy_budget=AccuracyBudget(max_strain_energy_error=budget))
     resolved = resolve_accuracy_budget(budgeted, tmp_path / "report.json")
     assert resolved.mechanics.rtol == 1e-6 and resolved.accuracy_budget is None
-    monkeypatch.setenv("DIATHERMY_ACCURACY_REPORT", str(out / "missing.json"))
     with pytest.raises(SceneError, match="cannot be read"):
-        resolve_accuracy_budget(budgeted)
+        resolve_accuracy_budget(budgeted, out / "missing.json")
 
 
 def test_accuracy_budget_ignores_runs_that_never_reached_the_mechanics(report):

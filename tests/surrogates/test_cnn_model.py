@@ -135,8 +135,6 @@ def test_checkpoint_round_trip_gives_identical_outputs(tmp_path: Path) -> None:
     assert loaded.grid_shape == (9, 9, 17) and loaded.metrics == {"best_val_loss": 0.5}
     p, phi = _fields((9, 9, 17), seed=1)
     np.testing.assert_array_equal(predict(loaded.model, p, phi), predict(model.eval(), p, phi))
-    again = DisplacementCNN.from_checkpoint(str(path))
-    np.testing.assert_array_equal(predict(again, p, phi), predict(model, p, phi))
     # plain content: loads with the safe unpickler
     assert isinstance(torch.load(path, weights_only=True), dict)
 

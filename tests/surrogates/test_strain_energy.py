@@ -40,7 +40,7 @@ def test_w_matches_the_mechanics_definition_per_tet(size_m: tuple[float, float, 
     geom = structured_geometry(mesh.points, mesh.tets, mesh.shape_id)
     tissue = Tissue()
     u, phi = _fields(grid, 0)
-    E = tet_youngs_modulus(phi, mesh.tets, tissue)
+    E = tet_youngs_modulus(phi, mesh, tissue)
     assert 0.1 < np.mean(E < tissue.youngs_modulus_pa) < 0.9  # both kinds of tets are tested
     W_np = strain_energy_density(geom.grads, mesh.tets, u.reshape(-1, 3), E, tissue.poisson_ratio)
     module = GridStrainEnergy(grid.spacing_m, tissue.poisson_ratio, tissue.ersatz_stiffness_ratio)

@@ -104,7 +104,7 @@ def test_dataset_then_training_to_an_active_model(
     stepped = api.post(f"/v1/sessions/{session.json()['id']}/step", json={"n": 2})
     assert stepped.status_code == 200, stepped.text
     sim = live.state.registry.sessions[session.json()["id"]].sim
-    assert sim._mechanics.name == "cnn" and sim._mechanics.model_path == path
+    assert sim.mechanics.name == "cnn" and sim.mechanics.model_path == path
 
     # another token sees none of these jobs
     with live.client(TOKEN_B) as other:

@@ -65,33 +65,32 @@ def test_a_named_model_of_another_grid_is_refused(tmp_path: Path) -> None:
         resolve_model(tmp_path, (7, 7, 13), "cnn:1")
 
 
-def test_the_engine_resolves_registry_names_and_the_active_model(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    from diathermy.engine.simulation import _cnn_model_path
+def test_the_registry_resolves_model_names_and_the_active_model(tmp_path: Path) -> None:
     from diathermy.errors import SceneError
+    from diathermy.worker.registry import RegistryModels
 
     data = tmp_path / "data"
-    monkeypatch.setenv("DIATHERMY_DATA_DIR", str(data))
     shipped = tmp_path / "shipped.pt"
 
     def fallback(grid: tuple[int, int, int]) -> Path:
         return shipped
 
+    models = RegistryModels(data, shipped=fallback)
+
     grid = (5, 5, 9)
-    assert _cnn_model_path(None, grid, fallback) == shipped  # empty registry: the shipped one
+    assert models(None, grid) == shipped  # empty registry: the shipped one
     _register(data, tmp_path, "cnn", grid)
     _register(data, tmp_path, "cnn", grid)
-    assert _cnn_model_path(None, grid, fallback) == shipped  # nothing active yet
+    assert models(None, grid) == shipped  # nothing active yet
     activate_model(data, "cnn:1")
-    assert _cnn_model_path(None, grid, fallback) == data / "models/cnn/1/model.pt"
-    assert _cnn_model_path("cnn", grid, fallback) == data / "models/cnn/2/model.pt"
-    assert _cnn_model_path("cnn:1", grid, fallback) == data / "models/cnn/1/model.pt"
+    assert models(None, grid) == data / "models/cnn/1/model.pt"
+    assert models("cnn", grid) == data / "models/cnn/2/model.pt"
+    assert models("cnn:1", grid) == data / "models/cnn/1/model.pt"
     own = tmp_path / "own.pt"
     own.write_bytes(b"w")
-    assert _cnn_model_path(str(own), grid, fallback) == own  # a file path wins
+    assert models(str(own), grid) == own  # a file path wins
     for bad in ["nope", "cnn:7", str(tmp_path / "missing.pt")]:
         with pytest.raises(SceneError, match=r"mechanics\.model.*neither a file"):
-            _cnn_model_path(bad, grid, fallback)
+            models(bad, grid)
     with pytest.raises(SceneError, match=r"mechanics\.model"):
-        _cnn_model_path("cnn", (7, 7, 13), fallback)  # trained on another grid
+        models("cnn", (7, 7, 13))  # trained on another grid

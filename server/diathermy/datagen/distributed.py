@@ -12,7 +12,7 @@ from __future__ import annotations
 import uuid
 from collections.abc import Sequence
 
-from diathermy.datagen.generate import ResultStream, Runner, compute_shard
+from diathermy.datagen.runners import ResultStream, Runner, compute_shard
 from diathermy.datagen.scenario import PhysicsFactory
 from diathermy.errors import DiathermyError
 

@@ -1,31 +1,33 @@
-"""The high-fidelity physics of a scenario: FEM elastostatics and the level-set cut.
+"""The high-fidelity physics of a scenario: the engine's own mechanics and dissection steps.
 
-A thin adapter from ``physics.mechanics`` / ``physics.strain_energy`` / ``physics.levelset`` /
-``physics.topology`` to ``ScenarioPhysics``; it holds no equation of its own. A tet is healthy
-when the topology rule does not call it removed (at least half its volume at phi < 0) and it is
-not a loose fragment. Removed tets take the ersatz modulus and carry no pore pressure.
+A thin adapter to ``ScenarioPhysics`` that holds no equation of its own: the mechanics is
+``physics.mechanics_backend.solve_with_cut`` (FEM, the cut as ersatz material) and the cut moves
+by ``physics.dissection.dissection_step``, exactly the functions the engine's effects call, with
+the same healthy rule (``physics.topology``: a tet is removed when at least half its volume is
+cut, or when it is part of a loose fragment), the same ersatz modulus and the same level-set law
+(the config's ``LevelSetConfig``). Like the engine, a step whose strain energy stays below kappa
+does not move the cut and does not count towards re-initialisation.
+
+One difference is deliberate: every sample is a fresh solve (no warm start from the previous
+sample), so a stored sample can be reproduced from its stored inputs alone.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
+import scipy.sparse as sp
 
 from diathermy.datagen.config import DatagenConfig
 from diathermy.fem.elastic import ElasticAssembler
 from diathermy.mesh import Grid, TetMesh, build_tet_mesh
-from diathermy.physics.levelset import (
-    advance,
-    front_speed,
-    initial_level_set,
-    reinitialize,
-    tet_to_node,
-)
-from diathermy.physics.mechanics import MechanicsSolver, mechanics_assembler
-from diathermy.physics.strain_energy import strain_energy_density
-from diathermy.physics.topology import loose_fragments, removed_fraction, removed_tets
+from diathermy.physics.dissection import cut_moves, dissection_step
+from diathermy.physics.levelset import initial_level_set, volume_incidence
+from diathermy.physics.mechanics import mechanics_assembler
+from diathermy.physics.mechanics_backend import FEMBackend, solve_with_cut
+from diathermy.physics.topology import Topology, evaluate_topology
 
 
 @lru_cache(maxsize=2)
@@ -37,72 +39,91 @@ def _mesh_and_assembler(
     return mesh, mechanics_assembler(mesh)
 
 
-@dataclass(frozen=True)
+@dataclass
 class FemPhysics:
-    """``ScenarioPhysics`` by FEM; one instance per scenario (it caches the scenario's solver)."""
+    """``ScenarioPhysics`` by the engine's FEM steps; one instance per scenario (it holds the
+    scenario's solver, its topology and its re-initialisation counter)."""
 
     mesh: TetMesh
     assembler: ElasticAssembler
     config: DatagenConfig
-    # The solver of the current topology: its AMG hierarchy and warm start live for one
-    # scenario only, so a scenario's samples never depend on which scenario ran before.
-    _solver: dict[bytes, MechanicsSolver] = field(default_factory=dict, repr=False)
+    # The solver of the current topology: its AMG hierarchy lives for one scenario only, so a
+    # scenario's samples never depend on which scenario ran before.
+    _topology: dict[bytes, Topology] = field(default_factory=dict, repr=False)
+    _steps_since_reinit: int = 0
+
+    @cached_property
+    def backend(self) -> FEMBackend:
+        m = self.config.material
+        return FEMBackend(
+            self.mesh,
+            poisson_ratio=m.poisson_ratio,
+            p0_pa=m.p_atm_pa,
+            rtol=self.config.mechanics_rtol,
+            ersatz_ratio=m.ersatz_stiffness_ratio,
+            assembler=self.assembler,
+        )
+
+    @cached_property
+    def incidence(self) -> sp.csr_matrix:
+        return volume_incidence(self.mesh.tets, self.assembler.geom.volumes, self.mesh.n_nodes)
 
     def initial_level_set(self) -> np.ndarray:
         return initial_level_set(self.mesh.grid).ravel()
 
+    def topology(self, phi: np.ndarray) -> Topology:
+        """The topology of nodal phi (n_nodes,) in m (the last one is kept)."""
+        key = np.asarray(phi, dtype=float).tobytes()
+        if key not in self._topology:
+            previous = next(iter(self._topology.values()), None)
+            topo = evaluate_topology(phi, self.mesh, self.assembler.geom.volumes, previous)
+            self._topology = {key: topo}
+        return self._topology[key]
+
     def removed(self, phi: np.ndarray) -> np.ndarray:
-        """Removed-tissue mask (n_tets,) of nodal phi (n_nodes,) in m."""
-        return removed_tets(removed_fraction(phi, self.mesh.tets))
+        """Removed tets (n_tets,) of phi: the cut (half or more of the volume) or loose."""
+        topo = self.topology(phi)
+        return topo.removed | topo.loose
 
     def healthy_tets(self, phi: np.ndarray) -> np.ndarray:
-        removed = self.removed(phi)
-        if not removed.any():
-            return ~removed
-        return ~removed & ~loose_fragments(removed, self.mesh)
-
-    def solver(self, removed: np.ndarray) -> MechanicsSolver:
-        """The mechanics solver of this removed mask (rebuilt when the cut changes)."""
-        key = np.packbits(removed).tobytes()
-        if key not in self._solver:
-            m = self.config.material
-            E = np.where(removed, m.ersatz_stiffness_ratio, 1.0) * m.youngs_modulus_pa
-            self._solver.clear()
-            self._solver[key] = MechanicsSolver(
-                self.mesh,
-                E,
-                m.poisson_ratio,
-                healthy=~removed,
-                ersatz_ratio=m.ersatz_stiffness_ratio,
-                rtol=self.config.mechanics_rtol,
-                assembler=self.assembler,
-            )
-        return self._solver[key]
+        return ~self.removed(phi)
 
     def solve(self, pressure_pa: np.ndarray, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        solver = self.solver(self.removed(phi))
-        u = solver.solve(pressure_pa, self.config.material.p_atm_pa).u
-        W = strain_energy_density(
-            self.assembler.geom.grads,
-            self.mesh.tets,
-            u,
-            solver.youngs_modulus_pa,
-            self.config.material.poisson_ratio,
+        out, W = solve_with_cut(
+            self.backend,
+            pressure_pa=pressure_pa,
+            level_set_m=phi,
+            removed=self.removed(phi),
+            warm_start=None,
+            tissue=self.config.material,
+            grads=self.assembler.geom.grads,
+            tets=self.mesh.tets,
         )
-        return u, W
+        return out.u, W
 
     def advance(self, phi: np.ndarray, strain_energy: np.ndarray, step: int) -> np.ndarray:
-        grid, ls = self.mesh.grid, self.config.level_set
-        volumes = self.assembler.geom.volumes
-        W_nodes = tet_to_node(strain_energy, self.mesh.tets, volumes, self.mesh.n_nodes)
-        F = front_speed(W_nodes, self.config.material.damage_kappa_j_per_m3, ls.v0_m_per_s)
-        new = advance(phi.reshape(grid.shape), F, grid.spacing_m, self.config.dt_s, cfl=ls.cfl).phi
-        if (step + 1) % ls.reinit_every == 0:
-            new = reinitialize(new, grid.spacing_m)
-        return new.ravel()
+        m = self.config.material
+        if not cut_moves(strain_energy, m.damage_kappa_j_per_m3):
+            return phi
+        res = dissection_step(
+            phi,
+            strain_energy,
+            self.removed(phi),
+            mesh=self.mesh,
+            grid=self.mesh.grid,
+            volumes=self.assembler.geom.volumes,
+            incidence=self.incidence,
+            law=self.config.level_set.law(m.damage_kappa_j_per_m3),
+            dt=self.config.dt_s,
+            steps_since_reinit=self._steps_since_reinit,
+            previous=self.topology(phi),
+        )
+        self._steps_since_reinit = res.steps_since_reinit
+        self._topology = {res.level_set.tobytes(): res.topology}
+        return res.level_set
 
 
 def fem_physics(config: DatagenConfig) -> FemPhysics:
-    """The default ``PhysicsFactory``: FEM mechanics and the level set of ``config``."""
+    """The default ``PhysicsFactory``: the engine's FEM mechanics and level set of ``config``."""
     mesh, assembler = _mesh_and_assembler(tuple(config.grid), tuple(config.block_m))
     return FemPhysics(mesh, assembler, config)

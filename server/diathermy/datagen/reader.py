@@ -49,11 +49,6 @@ class DatasetReader:
         return self.n_rows
 
     @property
-    def scenario_of_row(self) -> np.ndarray:
-        """Scenario index (n_rows,) of each committed row."""
-        return self._scenario
-
-    @property
     def step_of_row(self) -> np.ndarray:
         """Step index (n_rows,) of each committed row."""
         return self._step

@@ -1,6 +1,6 @@
 """Checkpoints: a simulation's whole state in one HDF5 file, and back.
 
-What is saved is what the next step reads: every field, the clock, the running energy totals, the
+What is saved is what the next step reads: every field, the clock, the energy ledger, the
 electrode overrides, the level-set re-initialisation counter, and the solver state that decides
 the next iterates bit for bit (the cached unit-current potential and the Krylov warm start). AMG
 hierarchies are not saved: the engine rebuilds them from the current operators, as the original
@@ -10,59 +10,77 @@ run does whenever an operator changes, so a restored run repeats the original ex
 from __future__ import annotations
 
 import json
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import h5py
 import numpy as np
 from pydantic import ValidationError
 
+from diathermy.engine.context import EngineContext
+from diathermy.engine.effects.electric import conductivity
+from diathermy.engine.effects.mechanics import load_key
 from diathermy.engine.electrodes import ElectrodeOverride
+from diathermy.engine.ledger import EnergyLedger
+from diathermy.engine.state import SimulationState
 from diathermy.errors import CheckpointError
+from diathermy.physics.electric import contact_weights
+from diathermy.physics.topology import evaluate_topology
 from diathermy.scene import Scene
 from diathermy.version import __version__
-
-if TYPE_CHECKING:
-    from diathermy.engine.simulation import Simulation
 
 CHECKPOINT_FORMAT = "diathermy-checkpoint"
 CHECKPOINT_VERSION = 1
 
 
-def save_checkpoint(sim: Simulation, path: str | Path) -> Path:
-    """Write ``sim`` to ``path`` atomically (a temporary file renamed into place)."""
+@dataclass(frozen=True)
+class SavedRun:
+    """The contents of a checkpoint file."""
+
+    scene: Scene
+    step: int
+    time_s: float
+    energy: EnergyLedger
+    overrides: dict[str, ElectrodeOverride]
+    arrays: dict[str, np.ndarray]
+    solver: dict[str, np.ndarray]
+    steps_since_reinit: int
+    mechanics_current: bool
+
+
+def save_checkpoint(
+    path: str | Path, scene: Scene, state: SimulationState, solver: dict[str, np.ndarray]
+) -> Path:
+    """Write the state to ``path`` atomically (a temporary file renamed into place)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
-    st = sim.state
     with h5py.File(tmp, "w") as f:
         f.attrs.update(
             format=CHECKPOINT_FORMAT,
             format_version=CHECKPOINT_VERSION,
             diathermy_version=__version__,
-            scene=sim.scene.model_dump_json(),
-            step=st.step,
-            time_s=st.time_s,
-            energy_j=json.dumps(st.energy_j),
-            overrides=json.dumps({k: asdict(v) for k, v in st.overrides.items()}),
-            steps_since_reinit=sim._steps_since_reinit,
-            mechanics_current=sim._last_mech_key is not None,
+            scene=scene.model_dump_json(),
+            step=state.step,
+            time_s=state.time_s,
+            energy_j=json.dumps(state.energy.totals()),
+            overrides=json.dumps({k: asdict(v) for k, v in state.overrides.items()}),
+            steps_since_reinit=state.memory.steps_since_reinit,
+            mechanics_current=state.memory.mechanics_key is not None,
         )
         g = f.create_group("state")
-        for name, arr in st.arrays.items():
+        for name, arr in state.arrays.items():
             g.create_dataset(name, data=arr, compression="gzip", compression_opts=1)
-        solver = f.create_group("solver")
-        for name, arr in sim.solver_state().items():
-            solver.create_dataset(name, data=arr)
+        group = f.create_group("solver")
+        for name, arr in solver.items():
+            group.create_dataset(name, data=arr)
     tmp.replace(path)
     return path
 
 
-def load_checkpoint(path: str | Path) -> Simulation:
-    """Rebuild a simulation from a checkpoint; corrupt or foreign files raise ``CheckpointError``."""
-    from diathermy.engine.simulation import Simulation
-
+def read_checkpoint(path: str | Path) -> SavedRun:
+    """Read a checkpoint; corrupt or foreign files raise ``CheckpointError``."""
     path = Path(path)
     try:
         f = h5py.File(path, "r")
@@ -77,38 +95,91 @@ def load_checkpoint(path: str | Path) -> Simulation:
                 f"{path}: checkpoint format version {version} is not supported (expected {CHECKPOINT_VERSION})"
             )
         try:
-            scene = Scene.model_validate_json(f.attrs["scene"])
-            step, time_s = int(f.attrs["step"]), float(f.attrs["time_s"])
-            energy = json.loads(f.attrs["energy_j"])
-            overrides = {k: _override(v) for k, v in json.loads(f.attrs["overrides"]).items()}
-            arrays = {k: v[()] for k, v in f["state"].items()}
-            solver = {k: v[()] for k, v in f["solver"].items()}
-            reinit = int(f.attrs["steps_since_reinit"])
-            mech_current = bool(f.attrs["mechanics_current"])
+            return SavedRun(
+                scene=Scene.model_validate_json(f.attrs["scene"]),
+                step=int(f.attrs["step"]),
+                time_s=float(f.attrs["time_s"]),
+                energy=EnergyLedger.from_totals(json.loads(f.attrs["energy_j"])),
+                overrides={k: _override(v) for k, v in json.loads(f.attrs["overrides"]).items()},
+                arrays={k: v[()] for k, v in f["state"].items()},
+                solver={k: v[()] for k, v in f["solver"].items()},
+                steps_since_reinit=int(f.attrs["steps_since_reinit"]),
+                mechanics_current=bool(f.attrs["mechanics_current"]),
+            )
         except (KeyError, ValueError, TypeError, OSError, ValidationError) as err:
             raise CheckpointError(
                 f"{path}: checkpoint is incomplete or corrupt ({type(err).__name__}: {err})"
             ) from None
-    sim = Simulation(scene)
-    expected = {k: (v.shape, v.dtype) for k, v in sim.state.arrays.items()}
-    got = {k: (v.shape, v.dtype) for k, v in arrays.items()}
-    if expected != got:
+
+
+def check_fields(
+    path: str | Path, expected: dict[str, np.ndarray], got: dict[str, np.ndarray]
+) -> None:
+    """Raise ``CheckpointError`` unless the saved fields fit the scene's grid and are finite."""
+    want = {k: (v.shape, v.dtype) for k, v in expected.items()}
+    have = {k: (v.shape, v.dtype) for k, v in got.items()}
+    if want != have:
         raise CheckpointError(
-            f"{path}: fields do not match the scene's grid ({sorted(set(expected) ^ set(got)) or 'shapes differ'})"
+            f"{path}: fields do not match the scene's grid ({sorted(set(want) ^ set(have)) or 'shapes differ'})"
         )
-    for name, arr in arrays.items():
+    for name, arr in got.items():
         if not np.all(np.isfinite(arr)) and arr.dtype != bool:
             raise CheckpointError(f"{path}: field {name} holds non-finite values")
-    st = sim.state
-    st.step, st.time_s, st.arrays, st.energy_j, st.overrides = (
-        step,
-        time_s,
-        arrays,
-        energy,
-        overrides,
-    )
-    sim.restore_solver_state(solver, steps_since_reinit=reinit, mechanics_current=mech_current)
-    return sim
+
+
+def solver_state(ctx: EngineContext) -> dict[str, np.ndarray]:
+    """Solver data that decides the next iterates: the cached unit potential, warm starts."""
+    out: dict[str, np.ndarray] = {}
+    warm = ctx.potential.solver.krylov.warm_start
+    if warm is not None:
+        out["potential_warm_start"] = warm
+    cached = ctx.potential.cached_unit_field()
+    if cached is not None:
+        contact, (V1, load1, R) = cached
+        key = ctx.contacts.key_of(contact)
+        if key is not None:
+            out["potential_unit_V"], out["potential_unit_load"] = V1, load1
+            out["potential_unit_R"] = np.asarray(R)
+            out["potential_contact_key"] = np.asarray(key)
+            # the conductivity V1 was solved with: the cut may have changed it since
+            out["potential_sigma"] = np.asarray(ctx.potential.solver.sigma)
+    return out
+
+
+def restore_solver_state(
+    ctx: EngineContext,
+    state: SimulationState,
+    solver: dict[str, np.ndarray],
+    *,
+    steps_since_reinit: int,
+    mechanics_current: bool,
+) -> None:
+    """Put back what ``solver_state`` saved, so the next step repeats the original run."""
+    memory = state.memory
+    memory.steps_since_reinit = steps_since_reinit
+    memory.topology = None
+    if ctx.has("dissection") and (state["removed"].any() or state.step > 0):
+        memory.topology = evaluate_topology(
+            state["level_set"], ctx.disc.mesh, ctx.disc.geom.volumes
+        )
+    memory.mechanics_key = load_key(state) if mechanics_current else None
+    if "potential_warm_start" in solver:
+        ctx.potential.solver.krylov.warm_start = solver["potential_warm_start"]
+    if "potential_unit_V" in solver:
+        x, y, z, r = (float(v) for v in solver["potential_contact_key"])
+        contact = contact_weights(ctx.disc.mesh, (x, y, z), r)
+        ctx.contacts.put((x, y, z, r), contact)
+        memory.contacts = ((x, y, z, r),)
+        sigma = solver.get("potential_sigma")
+        ctx.potential.solver.set_conductivity(conductivity(ctx, state) if sigma is None else sigma)
+        ctx.potential.restore_unit_field(
+            contact,
+            (
+                solver["potential_unit_V"],
+                solver["potential_unit_load"],
+                float(solver["potential_unit_R"]),
+            ),
+        )
 
 
 def _override(d: dict[str, Any]) -> ElectrodeOverride:

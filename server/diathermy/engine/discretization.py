@@ -35,10 +35,6 @@ class Discretization:
         """Nodal (n_nodes,) or (n_nodes, 3) -> grid-shaped (nz, ny, nx[, 3])."""
         return nodal.reshape(self.grid.shape + nodal.shape[1:])
 
-    def tet_mean(self, nodal: np.ndarray) -> np.ndarray:
-        """Mean over each tet's 4 nodes (n_tets,)."""
-        return nodal[self.mesh.tets].mean(axis=1)
-
 
 def build_discretization(
     shape: tuple[int, int, int], block_m: tuple[float, float, float]

@@ -6,7 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from diathermy.scene.models import Electrode, ElectrodePath
+from diathermy.errors import SceneError
+from diathermy.scene.models import Electrode, ElectrodePath, Scene
 
 
 @dataclass(frozen=True)
@@ -56,11 +57,6 @@ def path_position(path: ElectrodePath, t_s: float) -> tuple[float, float]:
     return float(x), float(y)
 
 
-def path_length_m(path: ElectrodePath) -> float:
-    """Arclength of the path in m."""
-    return float(np.linalg.norm(np.diff(path_polyline(path), axis=0), axis=1).sum())
-
-
 @dataclass(frozen=True)
 class ElectrodePose:
     """An electrode's state during one step."""
@@ -102,4 +98,50 @@ def electrode_pose(
             else o.current_density_a_per_m2
         ),
         active=bool(on),
+    )
+
+
+def override_electrode(
+    scene: Scene,
+    name: str,
+    old: ElectrodeOverride,
+    *,
+    position_m: tuple[float, float] | None = None,
+    power_w: float | None = None,
+    current_density_a_per_m2: float | None = None,
+    active: bool | None = None,
+) -> ElectrodeOverride:
+    """``old`` with the given changes (None keeps a value; a new drive replaces the other).
+
+    Raises ``SceneError`` naming the field for an unknown electrode, a position off the top
+    surface or a negative or non-finite drive.
+    """
+    names = [e.name for e in scene.electrodes]
+    if name not in names:
+        raise SceneError(f"unknown electrode {name!r}; electrodes: {', '.join(names) or 'none'}")
+    lx, ly, _ = scene.block_m
+    if position_m is not None:
+        x, y = (float(v) for v in position_m)
+        if not (np.isfinite(x) and np.isfinite(y) and 0.0 <= x <= lx and 0.0 <= y <= ly):
+            raise SceneError(
+                f"position_m: ({x}, {y}) lies off the top surface [0, {lx}] x [0, {ly}] m"
+            )
+        position_m = (x, y)
+    for field_name, value in (
+        ("power_w", power_w),
+        ("current_density_a_per_m2", current_density_a_per_m2),
+    ):
+        if value is not None and not (np.isfinite(value) and value >= 0):
+            raise SceneError(f"{field_name}: must be a finite number >= 0, got {value}")
+    return ElectrodeOverride(
+        position_m=position_m if position_m is not None else old.position_m,
+        power_w=power_w
+        if power_w is not None
+        else (None if current_density_a_per_m2 is not None else old.power_w),
+        current_density_a_per_m2=(
+            current_density_a_per_m2
+            if current_density_a_per_m2 is not None
+            else (None if power_w is not None else old.current_density_a_per_m2)
+        ),
+        active=active if active is not None else old.active,
     )

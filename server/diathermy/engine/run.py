@@ -7,6 +7,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from diathermy.engine.backends import ModelResolver
 from diathermy.engine.runfile import RunWriter
 from diathermy.engine.simulation import Simulation
 from diathermy.engine.vtu import write_pvd
@@ -43,9 +44,12 @@ def run_scene(
     vtu_dir: Path | None = None,
     every: int = 1,
     progress: bool = True,
+    models: ModelResolver | None = None,
 ) -> RunSummary:
-    """Build the simulation, advance it ``scene.steps`` steps, write every k-th step."""
-    sim = Simulation(scene)
+    """Build the simulation, advance it ``scene.steps`` steps, write every k-th step.
+
+    ``models`` looks up surrogate model names (see ``engine.backends``)."""
+    sim = Simulation(scene, models=models)
     pvd: list[tuple[float, str]] = []
     wall = 0.0
     tmax = pmax = 0.0

@@ -1,4 +1,5 @@
-"""The mutable state of a simulation: every field, the clock, running energy totals, overrides."""
+"""The mutable state of a simulation: every field, the clock, the energy ledger, the electrode
+overrides, and what the effects remember between steps (named, never hidden attributes)."""
 
 from __future__ import annotations
 
@@ -7,7 +8,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from diathermy.engine.electrodes import ElectrodeOverride
+from diathermy.engine.ledger import EnergyLedger
 from diathermy.physics.materials import Tissue
+from diathermy.physics.topology import Topology
 
 NODAL_FIELDS = (
     "potential",
@@ -19,6 +22,26 @@ NODAL_FIELDS = (
 )
 VECTOR_FIELDS = ("displacement",)
 CELL_FIELDS = ("joule_heat", "strain_energy", "removed")
+
+ContactKey = tuple[float, float, float, float]
+"""A contact disk: centre (x, y, z) and radius, in m."""
+
+
+@dataclass
+class EffectMemory:
+    """What effects carry from one step to the next besides the fields.
+
+    steps_since_reinit: dissection steps since the level set was last re-initialised.
+    mechanics_key: the (pressure, removed) bytes the displacement was solved for, None when u
+        is not the solution of the current state.
+    topology: the last topology the dissection evaluated (removed and loose tets, crater).
+    contacts: the contact disks the electric effect used last step (empty: none).
+    """
+
+    steps_since_reinit: int = 0
+    mechanics_key: tuple[bytes, bytes] | None = None
+    topology: Topology | None = None
+    contacts: tuple[ContactKey, ...] = ()
 
 
 @dataclass
@@ -33,10 +56,9 @@ class SimulationState:
     step: int
     time_s: float
     arrays: dict[str, np.ndarray]
-    energy_j: dict[str, float] = field(default_factory=dict)
+    energy: EnergyLedger = field(default_factory=EnergyLedger)
     overrides: dict[str, ElectrodeOverride] = field(default_factory=dict)
-    warm_starts: dict[str, np.ndarray] = field(default_factory=dict)
-    counters: dict[str, int] = field(default_factory=dict)
+    memory: EffectMemory = field(default_factory=EffectMemory)
 
     def __getitem__(self, name: str) -> np.ndarray:
         return self.arrays[name]
@@ -64,10 +86,4 @@ def initial_state(
         "strain_energy": np.zeros(n_tets),
         "removed": np.zeros(n_tets, dtype=bool),
     }
-    energy = {
-        "joule_in": 0.0,
-        "convective_out": 0.0,
-        "sensible_stored": 0.0,
-        "latent_stored": 0.0,
-    }
-    return SimulationState(step=0, time_s=0.0, arrays=arrays, energy_j=energy)
+    return SimulationState(step=0, time_s=0.0, arrays=arrays)

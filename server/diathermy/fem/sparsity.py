@@ -30,12 +30,6 @@ class Pattern:
         data = np.bincount(self.slot.ravel(), local.ravel(), minlength=self.nnz)
         return sp.csr_matrix((data, self.indices, self.indptr), shape=(self.n, self.n))
 
-    def diagonal_slots(self) -> np.ndarray:
-        """Positions (n,) of the diagonal entries in the CSR data."""
-        rows = np.repeat(np.arange(self.n), np.diff(self.indptr))
-        diag = np.flatnonzero(rows == self.indices)
-        return diag
-
 
 def build_pattern(tets: np.ndarray, n_nodes: int) -> Pattern:
     """The CSR pattern of the node couplings of ``tets`` (n_tets, 4)."""

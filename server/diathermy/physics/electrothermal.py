@@ -45,14 +45,8 @@ from diathermy.physics.electric import (
     drive_current,
     joule_heat,
 )
-from diathermy.physics.thermal import (
-    HeatEnergy,
-    HeatStepper,
-    HeatStepStats,
-    heat_energy,
-    heat_mesh,
-    heat_rhs,
-)
+from diathermy.physics.heat_operator import HeatEnergy, heat_energy, heat_mesh, heat_rhs
+from diathermy.physics.thermal import HeatStepper, HeatStepStats
 
 
 @dataclass(frozen=True)

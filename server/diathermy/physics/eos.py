@@ -199,6 +199,21 @@ def _solve_balance(
     )  # fmt: skip
 
 
+def water_mass_density(tissue: Tissue) -> float:
+    """m_w = w rho(x = 0) in kg/m^3: water (liquid + vapor) per unit volume, conserved by boiling.
+
+    rho(x = 0) = (1 - w) rho_solid + w rho_water (no vapor yet): 713.86 kg/m^3 with the defaults.
+    """
+    w = tissue.water_content
+    intact = (1.0 - w) * tissue.rho_solid_kg_per_m3 + w * tissue.rho_water_kg_per_m3
+    return float(w * intact)
+
+
+def latent_heat_per_volume(tissue: Tissue) -> float:
+    """m_w h_fg in J/m^3: the latent heat stored per unit volume at x = 1 (stored: m_w h_fg x)."""
+    return water_mass_density(tissue) * tissue.latent_heat_j_per_kg
+
+
 def local_energy_balance(
     T_star: ArrayF,
     x_old: ArrayF,
@@ -255,9 +270,6 @@ def local_energy_balance(
     if not np.all(rho_c[nodes] > 0.0) or not np.all(T_star[nodes] > 0.0):
         raise ValueError("local_energy_balance: rho_c and T* must be positive")
     if water_kg_per_m3 is None:
-        # imported here: properties depends on this module for the vapor density
-        from diathermy.physics.properties import water_mass_density
-
         water_kg_per_m3 = water_mass_density(tissue)
     latent = np.broadcast_to(np.asarray(water_kg_per_m3, float), T_star.shape)[nodes]
     latent = latent * tissue.latent_heat_j_per_kg

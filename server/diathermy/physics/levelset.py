@@ -21,44 +21,10 @@ import skfmm
 
 from diathermy.errors import SolverDivergedError
 from diathermy.mesh.grid import Grid
+from diathermy.physics.levelset_law import CFL, MAX_SUBSTEPS, REINIT_BAND_CELLS, V0_M_PER_S
 
 Spacing = tuple[float, float, float]
 """Node spacing (dx, dy, dz) in m, the order of ``Grid.spacing_m``; arrays are (z, y, x)."""
-
-
-@dataclass(frozen=True)
-class LevelSetParams:
-    """Defaults of the dissection model.
-
-    Attributes:
-        v0_m_per_s: front speed scale v0 in m/s; F = v0 (W / kappa - 1) where W > kappa.
-        cfl: sub-step Courant number, dt_sub max F (1/dx + 1/dy + 1/dz) <= cfl (0 < cfl <= 1;
-            the scheme is monotone up to 1).
-        reinit_every_steps: re-initialise to a signed distance every this many physical steps
-            (the caller's schedule; 0 = never).
-        reinit_band_cells: half-width of the re-initialised band around the front, in cells of
-            the largest spacing, worked on around the removed region only; None re-initialises
-            the whole block (at 64x64x128 nodes ~0.6 s against ~15 ms for a small crater).
-        max_substeps: sub-steps one physical step may take before ``advance`` gives up.
-    """
-
-    v0_m_per_s: float = 5e-3
-    cfl: float = 0.5
-    reinit_every_steps: int = 5
-    reinit_band_cells: float | None = 6.0
-    max_substeps: int = 10_000
-
-    def __post_init__(self) -> None:
-        if not (self.v0_m_per_s >= 0 and math.isfinite(self.v0_m_per_s)):
-            raise ValueError(f"v0_m_per_s must be finite and >= 0, got {self.v0_m_per_s}")
-        if not 0 < self.cfl <= 1:
-            raise ValueError(f"cfl must lie in (0, 1], got {self.cfl}")
-        if self.reinit_every_steps < 0:
-            raise ValueError(f"reinit_every_steps must be >= 0, got {self.reinit_every_steps}")
-        if self.reinit_band_cells is not None and not self.reinit_band_cells > 1:
-            raise ValueError(f"reinit_band_cells must be > 1 or None, got {self.reinit_band_cells}")
-        if self.max_substeps < 1:
-            raise ValueError(f"max_substeps must be >= 1, got {self.max_substeps}")
 
 
 @dataclass(frozen=True)
@@ -78,9 +44,7 @@ def initial_level_set(grid: Grid) -> np.ndarray:
     return np.broadcast_to((z[-1] - z)[:, None, None], grid.shape).copy()
 
 
-def front_speed(
-    W_nodes: np.ndarray, kappa: float, v0: float = LevelSetParams.v0_m_per_s
-) -> np.ndarray:
+def front_speed(W_nodes: np.ndarray, kappa: float, v0: float = V0_M_PER_S) -> np.ndarray:
     """Normal front speed F = v0 max(0, W / kappa - 1) in m/s, same shape as W (J/m^3).
 
     kappa is the damage threshold in J/m^3, v0 the speed scale in m/s. The one place of this law.
@@ -201,8 +165,8 @@ def advance(
     spacing: Spacing,
     dt: float,
     *,
-    cfl: float = LevelSetParams.cfl,
-    max_substeps: int = LevelSetParams.max_substeps,
+    cfl: float = CFL,
+    max_substeps: int = MAX_SUBSTEPS,
 ) -> LevelSetStep:
     """Advance phi_t + F |grad phi| = 0 by dt seconds with F >= 0 (m/s); returns a new phi.
 
@@ -266,7 +230,7 @@ def reinitialize(
     phi: np.ndarray,
     spacing: Spacing,
     *,
-    band_cells: float | None = LevelSetParams.reinit_band_cells,
+    band_cells: float | None = REINIT_BAND_CELLS,
 ) -> np.ndarray:
     """Back to a signed distance (nz, ny, nx) in m, keeping the cut where it is (scikit-fmm).
 

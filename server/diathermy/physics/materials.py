@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+import numpy as np
+
 from diathermy.errors import SceneError
 
 
@@ -74,14 +76,18 @@ class Tissue:
         return self.youngs_modulus_pa / (2.0 * (1.0 + self.poisson_ratio))
 
     @property
-    def lame_lambda_pa(self) -> float:
-        """lambda = E nu / ((1 + nu)(1 - 2 nu))."""
-        E, nu = self.youngs_modulus_pa, self.poisson_ratio
-        return E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
-
-    @property
     def pore_modulus_pa(self) -> float:
         """K_m, the stiffness confining a micropore: K by default, 4G/3 as an option."""
         if self.pore_stiffness == "bulk":
             return self.bulk_modulus_pa
         return 4.0 * self.shear_modulus_pa / 3.0
+
+
+def ersatz_youngs_modulus(
+    healthy: np.ndarray, youngs_modulus_pa: float, ersatz_ratio: float
+) -> np.ndarray:
+    """E per tet in Pa: the tissue's where healthy, the ersatz ratio E of removed tissue elsewhere.
+
+    The one place of the ersatz-material rule (removed tets stay in the mesh, nearly void).
+    """
+    return np.where(healthy, youngs_modulus_pa, ersatz_ratio * youngs_modulus_pa)

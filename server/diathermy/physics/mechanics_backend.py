@@ -13,7 +13,9 @@ import numpy as np
 
 from diathermy.fem.elastic import ElasticAssembler
 from diathermy.mesh import TetMesh
+from diathermy.physics.materials import Tissue, ersatz_youngs_modulus
 from diathermy.physics.mechanics import MechanicsSolver, mechanics_assembler
+from diathermy.physics.strain_energy import strain_energy_density
 
 
 @dataclass(frozen=True)
@@ -131,3 +133,32 @@ class FEMBackend:
                 "solve_s": res.stats.solve_s,
             },
         )
+
+
+def solve_with_cut(
+    backend: MechanicsBackend,
+    *,
+    pressure_pa: np.ndarray,
+    level_set_m: np.ndarray,
+    removed: np.ndarray,
+    warm_start: np.ndarray | None,
+    tissue: Tissue,
+    grads: np.ndarray,
+    tets: np.ndarray,
+) -> tuple[MechanicsOutput, np.ndarray]:
+    """Displacement under the pore pressure (Pa) with the cut as ersatz material, and the strain
+    energy density per tet (J/m^3) of the stiffness it was solved with (a loose fragment is
+    ersatz too). The one mechanics step of the engine and the dataset generator."""
+    E = ersatz_youngs_modulus(~removed, tissue.youngs_modulus_pa, tissue.ersatz_stiffness_ratio)
+    out = backend.solve(
+        pressure_pa=pressure_pa,
+        level_set_m=level_set_m,
+        youngs_modulus_pa=E,
+        healthy=~removed,
+        warm_start=warm_start,
+    )
+    E_eff = E.copy()
+    if out.loose_tets is not None:
+        E_eff[out.loose_tets] = tissue.ersatz_stiffness_ratio * tissue.youngs_modulus_pa
+    W = strain_energy_density(grads, tets, out.u, E_eff, tissue.poisson_ratio)
+    return out, W

@@ -54,17 +54,6 @@ def volumetric_heat_capacity(
     return effective_density(x, p, T, tissue) * effective_heat_capacity(x, tissue)
 
 
-def water_mass_density(tissue: Tissue) -> float:
-    """m_w = w rho(x = 0) in kg/m^3: water (liquid + vapor) per unit volume, conserved by boiling.
-
-    The latent heat stored per unit volume is m_w h_fg x (713.86 kg/m^3 with the defaults).
-    """
-    intact = _mix(
-        0.0, tissue.rho_solid_kg_per_m3, tissue.rho_water_kg_per_m3, 0.0, tissue.water_content
-    )
-    return float(tissue.water_content * intact)
-
-
 def nodes_to_tets(values: ArrayF, tets: ArrayF) -> ArrayF:
     """Mean of the 4 nodal values per tet: values (n_nodes, ...) -> (n_tets, ...)."""
     return np.asarray(values)[np.asarray(tets)].mean(axis=1)

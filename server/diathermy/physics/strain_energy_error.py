@@ -13,16 +13,17 @@ from typing import Any
 import numpy as np
 
 from diathermy.fem.geometry import structured_geometry
-from diathermy.mesh import Grid, build_tet_mesh
-from diathermy.physics.materials import Tissue
+from diathermy.mesh import Grid, TetMesh, build_tet_mesh
+from diathermy.physics.materials import Tissue, ersatz_youngs_modulus
 from diathermy.physics.strain_energy import relative_strain_energy_error, strain_energy_density
+from diathermy.physics.topology import healthy_tets
 
 
-def tet_youngs_modulus(level_set_m: np.ndarray, tets: np.ndarray, tissue: Tissue) -> np.ndarray:
-    """E per tet (n_tets,) Pa: healthy where the tet's mean nodal phi > 0, ersatz where cut."""
-    phi_tet = level_set_m.reshape(-1)[tets].mean(axis=1)
-    E = tissue.youngs_modulus_pa
-    return np.where(phi_tet > 0.0, E, tissue.ersatz_stiffness_ratio * E)
+def tet_youngs_modulus(level_set_m: np.ndarray, mesh: TetMesh, tissue: Tissue) -> np.ndarray:
+    """E per tet (n_tets,) Pa: the tissue's on healthy tets (``topology.healthy_tets``), the
+    ersatz modulus on removed ones, as the engine solves them."""
+    healthy = healthy_tets(level_set_m.reshape(-1), mesh)
+    return ersatz_youngs_modulus(healthy, tissue.youngs_modulus_pa, tissue.ersatz_stiffness_ratio)
 
 
 def dataset_tissue(material: Mapping[str, Any] | None) -> Tissue:
@@ -52,7 +53,7 @@ def strain_energy_error_on_grid(
         u: np.ndarray, u_ref: np.ndarray, pressure: np.ndarray, level_set: np.ndarray
     ) -> float:
         del pressure  # W is of the total strain (PHYSICS.md section 2): no pressure term
-        E = tet_youngs_modulus(np.asarray(level_set, float), mesh.tets, tissue)
+        E = tet_youngs_modulus(np.asarray(level_set, float), mesh, tissue)
         nu = tissue.poisson_ratio
         W = strain_energy_density(geom.grads, mesh.tets, np.reshape(u, (-1, 3)), E, nu)
         W_ref = strain_energy_density(geom.grads, mesh.tets, np.reshape(u_ref, (-1, 3)), E, nu)

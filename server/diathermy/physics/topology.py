@@ -80,6 +80,16 @@ def removed_tets(fraction: np.ndarray) -> np.ndarray:
     return np.asarray(fraction) >= REMOVED_FRACTION
 
 
+def healthy_tets(phi_nodes: np.ndarray, mesh: TetMesh) -> np.ndarray:
+    """The one healthy rule (n_tets,): less than half the tet's volume is cut (phi < 0) and the
+    tet is not part of a fragment cut loose from the bottom. The engine's removed mask, the
+    dataset generator's walk and the surrogates' strain-energy metric and loss all use it."""
+    removed = removed_tets(removed_fraction(phi_nodes, mesh.tets))
+    if not removed.any():
+        return ~removed
+    return ~(removed | loose_fragments(removed, mesh))
+
+
 def cut_volume(fraction: np.ndarray, volumes: np.ndarray) -> float:
     """Removed volume in m^3, exact for P1 phi: sum of fraction (n_tets,) x tet volume (m^3)."""
     return float(np.dot(fraction, volumes))

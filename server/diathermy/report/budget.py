@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 from typing import Any
 
@@ -59,12 +58,12 @@ PACKAGED_REPORT = Path(__file__).with_name("data") / "accuracy_cost.json"
 def resolve_accuracy_budget(scene: Scene, report_path: str | Path | None = None) -> Scene:
     """The scene with the cheapest measured mechanics variant meeting its ``accuracy_budget``.
 
-    The report comes from ``report_path``, else ``$DIATHERMY_ACCURACY_REPORT``, else the one
-    packaged with diathermy. A scene without a budget is returned unchanged.
+    The report comes from ``report_path`` (the entry points pass ``$DIATHERMY_ACCURACY_REPORT``),
+    else the one packaged with diathermy. A scene without a budget is returned unchanged.
     """
     if scene.accuracy_budget is None:
         return scene
-    path = report_path or os.environ.get("DIATHERMY_ACCURACY_REPORT") or PACKAGED_REPORT
+    path = report_path or PACKAGED_REPORT
     grid = "x".join(str(n) for n in scene.grid)
     row = cheapest_within(
         load_report(path),

@@ -29,10 +29,10 @@ def _models(items: list[str]) -> dict[str, str]:
 
 
 def _cmd(args: argparse.Namespace) -> int:
-    from diathermy.cli import parse_grid, resolve_scene
     from diathermy.report.accuracy_cost import accuracy_cost_report
     from diathermy.report.budget import PACKAGED_REPORT
     from diathermy.report.variants import default_variants
+    from diathermy.scene import parse_grid, resolve_scene
 
     scenes = [resolve_scene(s) for s in args.scenes.split(",")]
     if args.grid:

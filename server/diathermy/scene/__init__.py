@@ -13,6 +13,7 @@ from diathermy.scene.models import (
     SolverConfig,
     close_effects,
 )
+from diathermy.scene.resolve import parse_grid, resolve_scene
 
 __all__ = [
     "EFFECTS",
@@ -27,6 +28,8 @@ __all__ = [
     "builtin_scene_names",
     "close_effects",
     "load_scene",
+    "parse_grid",
+    "resolve_scene",
     "scene_from_dict",
     "scene_json_schema",
 ]

@@ -7,6 +7,7 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from diathermy.physics.levelset_law import CFL, REINIT_EVERY, V0_M_PER_S, LevelSetLaw
 from diathermy.physics.materials import Tissue
 
 SCHEMA_VERSION: Literal[1] = 1
@@ -143,9 +144,18 @@ class MechanicsConfig(_Model):
 class LevelSetConfig(_Model):
     """The dissection law and its numerics (PHYSICS.md section 4)."""
 
-    v0_m_per_s: Positive = 5e-3
-    reinit_every: Annotated[int, Field(ge=1)] = 10
-    cfl: Annotated[float, Field(gt=0, le=1)] = 0.5
+    v0_m_per_s: Positive = V0_M_PER_S
+    reinit_every: Annotated[int, Field(ge=1)] = REINIT_EVERY
+    cfl: Annotated[float, Field(gt=0, le=1)] = CFL
+
+    def law(self, kappa_j_per_m3: float) -> LevelSetLaw:
+        """The law these settings give with the tissue's damage threshold kappa (J/m^3)."""
+        return LevelSetLaw(
+            v0_m_per_s=self.v0_m_per_s,
+            kappa_j_per_m3=kappa_j_per_m3,
+            cfl=self.cfl,
+            reinit_every=self.reinit_every,
+        )
 
 
 class AccuracyBudget(_Model):

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -34,8 +33,6 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         if args.token:
             settings = settings.model_copy(update={"tokens": [*settings.tokens, *args.token]})
         configure_logging(settings.log_level)
-        # sessions resolve registry model names in the server's data dir (engine: $DIATHERMY_DATA_DIR)
-        os.environ["DIATHERMY_DATA_DIR"] = str(settings.data_dir)
         app = create_app(settings)
     except (ValidationError, ValueError, OSError) as err:
         print(f"diathermy: error: {err}", file=sys.stderr)

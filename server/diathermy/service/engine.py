@@ -1,7 +1,12 @@
-"""The engine as the service sees it: build a simulation from a scene, load one from a checkpoint."""
+"""The engine as the service sees it: build a simulation from a scene, load one from a checkpoint.
+
+The service resolves policy here and hands it to the engine: a scene's accuracy budget (the
+accuracy report) and the model registry of its data directory.
+"""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -17,14 +22,29 @@ class EngineAdapter(Protocol):
 
 
 class DefaultEngine:
-    """The real engine, imported on first use so that the app starts fast."""
+    """The real engine, imported on first use so that the app starts fast.
+
+    ``data_dir``: the server's data directory, whose model registry resolves surrogate model
+    names (None: model files and the shipped models only)."""
+
+    def __init__(self, data_dir: Path | None = None) -> None:
+        self.data_dir = data_dir
+
+    def _models(self) -> Any:
+        if self.data_dir is None:
+            return None
+        from diathermy.worker.registry import RegistryModels
+
+        return RegistryModels(self.data_dir)
 
     def create(self, scene: Scene) -> Any:
         from diathermy.engine.simulation import Simulation
+        from diathermy.report.budget import resolve_accuracy_budget
 
-        return Simulation(scene)
+        report = os.environ.get("DIATHERMY_ACCURACY_REPORT")
+        return Simulation(resolve_accuracy_budget(scene, report), models=self._models())
 
     def load(self, path: Path) -> Any:
         from diathermy.engine.simulation import Simulation
 
-        return Simulation.load_checkpoint(path)
+        return Simulation.load_checkpoint(path, models=self._models())

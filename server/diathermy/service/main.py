@@ -52,7 +52,7 @@ def create_app(settings: Settings | None = None, *, engine: EngineAdapter | None
     state = AppState(
         settings=settings,
         tokens=TokenStore.from_settings(settings),
-        registry=SessionRegistry(settings.data_dir, engine or DefaultEngine()),
+        registry=SessionRegistry(settings.data_dir, engine or DefaultEngine(settings.data_dir)),
         metrics=ServiceMetrics(),
     )
 

@@ -31,14 +31,12 @@ from diathermy.physics.equilibrium_guard import (
     GuardPreconditioners,
     correct,
     jacobi_cg,
-    node_graph,
-    patch_correct,
     relative_residual,
-    residual_patch,
     ritz_scale,
 )
 from diathermy.physics.mechanics import MechanicsSolver, clamped_bottom
 from diathermy.physics.mechanics_backend import FEMBackend, MechanicsOutput
+from diathermy.physics.patch_correction import node_graph, patch_correct, residual_patch
 from diathermy.surrogates.checkpoint import load_checkpoint
 from diathermy.surrogates.inference import default_device
 

@@ -87,15 +87,6 @@ class DisplacementCNN(nn.Module):
         """Inverse of :meth:`constructor_args`."""
         return cls(CNNConfig(**args["config"]), FieldScales(**args["scales"]))
 
-    @classmethod
-    def from_checkpoint(
-        cls, path: str, *, expected_grid: tuple[int, int, int] | None = None
-    ) -> DisplacementCNN:
-        """Rebuild exactly the trained model (weights and normaliser buffers) from a file."""
-        from diathermy.surrogates.checkpoint import load_checkpoint
-
-        return load_checkpoint(path, expected_grid=expected_grid).model
-
     def with_mask_input(self) -> DisplacementCNN:
         """A copy that also reads the tissue mask and computes exactly what this model does.
 

@@ -22,11 +22,6 @@ def relative_l2_per_sample(pred: torch.Tensor, target: torch.Tensor) -> torch.Te
     return torch.where(ref > 0, diff / ref.clamp_min(torch.finfo(torch.float32).tiny), diff)
 
 
-def max_abs_per_sample(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """max |pred - target| over nodes and components per sample, (N,)."""
-    return (pred.float() - target.float()).abs().flatten(1).amax(dim=1)
-
-
 def training_loss(
     pred: torch.Tensor,
     target: torch.Tensor,

@@ -136,10 +136,6 @@ class FieldNormalizer(nn.Module):
         phi = level_set_m / self.level_set_scale_m
         return torch.stack([p, phi], dim=1)
 
-    def normalise_inputs(self, x: torch.Tensor) -> torch.Tensor:
-        """(N, 2, D, H, W) physical (p Pa, phi m) -> normalised, same shape."""
-        return self.encode_inputs(x[:, 0], x[:, 1])
-
     def encode_displacement(self, u_m: torch.Tensor, pressure_pa: torch.Tensor) -> torch.Tensor:
         """(N, 3, D, H, W) displacement in m under (N, D, H, W) pressure Pa -> network units.
 

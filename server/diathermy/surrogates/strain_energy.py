@@ -5,18 +5,22 @@ mu eps:eps of the total strain, per linear tetrahedron) evaluated on the structu
 (``diathermy.mesh.kuhn_corners``) with autograd, so a loss can be taken on W itself: the paper's
 accuracy measure (eq. 20/21). The tets' gradients come from the mesh's own corner table; the
 tests check W against the numpy definition on the mesh. E is in units of the tissue's modulus
-(1 where the tet is healthy, the ersatz ratio where its mean nodal phi <= 0), so W is in units of E.
+(1 where the tet is healthy by the engine's rule, ``physics.topology.healthy_tets``, the ersatz
+ratio elsewhere), so W is in units of E.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import lru_cache
 
 import numpy as np
 import torch
 
 from diathermy.fem.elastic import lame_parameters
+from diathermy.mesh import Grid, TetMesh, build_tet_mesh
 from diathermy.mesh.tet_mesh import kuhn_corners
+from diathermy.physics.topology import healthy_tets
 
 
 def kuhn_gradients(spacing_m: Sequence[float]) -> np.ndarray:
@@ -28,6 +32,13 @@ def kuhn_gradients(spacing_m: Sequence[float]) -> np.ndarray:
         inv = np.linalg.inv((x[1:] - x[0]).T)  # rows: gradients of barycentrics 1..3
         out.append(np.vstack([-inv.sum(axis=0), inv]))
     return np.array(out)
+
+
+@lru_cache(maxsize=4)
+def _kuhn_mesh(shape: tuple[int, int, int]) -> TetMesh:
+    """The Kuhn mesh of a grid of (nz, ny, nx) nodes (unit spacing: the rule needs no lengths)."""
+    nz, ny, nx = shape
+    return build_tet_mesh(Grid(shape, size_m=(nx - 1.0, ny - 1.0, nz - 1.0)))
 
 
 class GridStrainEnergy(torch.nn.Module):
@@ -57,9 +68,20 @@ class GridStrainEnergy(torch.nn.Module):
         d, h, w = field.shape[-3:]
         return field[..., oz : oz + d - 1, oy : oy + h - 1, ox : ox + w - 1]
 
+    @staticmethod
+    def healthy_mask(phi: torch.Tensor) -> torch.Tensor:
+        """(N, 6, D-1, H-1, W-1) bool: each tet healthy by ``physics.topology.healthy_tets``."""
+        d, h, w = phi.shape[-3:]
+        mesh = _kuhn_mesh((int(d), int(h), int(w)))
+        flat = phi.detach().to("cpu", torch.float64).numpy().reshape(-1, d * h * w)
+        masks = np.stack([healthy_tets(row, mesh) for row in flat])
+        masks = masks.reshape(-1, d - 1, h - 1, w - 1, 6).transpose(0, 4, 1, 2, 3)
+        return torch.from_numpy(np.ascontiguousarray(masks)).to(phi.device)
+
     def forward(self, u: torch.Tensor, phi: torch.Tensor) -> torch.Tensor:
         u = u.float()
         grads = self.grads
+        healthy = self.healthy_mask(phi)
         shapes = []
         for s, corners in enumerate(self.corners):
             # du_i/dx_k = sum_a u_i(vertex a) g[a, k]: (N, 3, 3, D-1, H-1, W-1)
@@ -72,8 +94,7 @@ class GridStrainEnergy(torch.nn.Module):
             eps = 0.5 * (G + G.transpose(1, 2))
             trace = eps[:, 0, 0] + eps[:, 1, 1] + eps[:, 2, 2]
             W = 0.5 * self.lam * trace**2 + self.mu * torch.square(eps).sum(dim=(1, 2))
-            phi_tet = torch.stack([self._corner(phi, c) for c in corners]).mean(dim=0)
-            shapes.append(torch.where(phi_tet > 0, W, self.ersatz_ratio * W))
+            shapes.append(torch.where(healthy[:, s], W, self.ersatz_ratio * W))
         return torch.stack(shapes, dim=1)
 
 

@@ -12,6 +12,7 @@ import os
 import re
 import shutil
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -202,3 +203,41 @@ def resolve_model(
             f"the scene's grid is {grid_key(grid_shape)}"
         )
     return info.path
+
+
+class RegistryModels:
+    """The ``ModelResolver`` of a data directory's registry: ``mechanics.model`` as a file
+    path, else a registry name (``name`` or ``name:version``); with none given, the grid's
+    active model, else the model shipped for the grid. Errors name ``mechanics.model``."""
+
+    def __init__(
+        self,
+        data_dir: str | Path,
+        shipped: Callable[[tuple[int, int, int]], Path] | None = None,
+    ) -> None:
+        self.data_dir = Path(data_dir)
+        self.shipped = shipped
+
+    def _shipped(self, grid: tuple[int, int, int]) -> Path:
+        if self.shipped is not None:
+            return self.shipped(grid)
+        from diathermy.engine.backends import shipped_models
+
+        return shipped_models(None, grid)
+
+    def __call__(self, model: str | None, grid: tuple[int, int, int]) -> Path:
+        if model is not None and Path(model).is_file():
+            return Path(model)
+        if model is None:
+            active = resolve_model(self.data_dir, grid)
+            return active if active is not None else self._shipped(grid)
+        try:
+            path = resolve_model(self.data_dir, grid, model)
+        except SceneError as err:
+            raise SceneError(
+                f"mechanics.model: {model!r} is neither a file nor a model in the registry at "
+                f"{self.data_dir} ({err})"
+            ) from None
+        if path is None or not Path(path).is_file():
+            raise SceneError(f"mechanics.model: registry model {model!r} has no checkpoint file")
+        return Path(path)

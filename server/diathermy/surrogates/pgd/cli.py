@@ -46,7 +46,7 @@ def read_config(path: str | Path) -> dict[str, Any]:
 
 
 def _cmd_pgd_build(args: argparse.Namespace) -> int:
-    from diathermy.cli import resolve_scene
+    from diathermy.scene import resolve_scene
     from diathermy.surrogates.pgd.model import save_model
     from diathermy.surrogates.pgd.offline import TrainingManifold, build_model
 

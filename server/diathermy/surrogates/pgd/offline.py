@@ -21,7 +21,7 @@ import numpy as np
 from diathermy.errors import SceneError
 from diathermy.fem.geometry import ElementGeometry, structured_geometry
 from diathermy.mesh import Grid, TetMesh, build_tet_mesh
-from diathermy.physics.materials import Tissue
+from diathermy.physics.materials import Tissue, ersatz_youngs_modulus
 from diathermy.physics.mechanics import MechanicsSolver, mechanics_assembler
 from diathermy.physics.topology import contact_height, evaluate_topology
 from diathermy.surrogates.pgd.kpca import fit_topology_map
@@ -119,11 +119,7 @@ def snapshot_tensor(
         phis[ig] = phi
         topo = evaluate_topology(phi, mesh, geom.volumes)
         removed = topo.removed | topo.loose
-        E = np.where(
-            removed,
-            tissue.ersatz_stiffness_ratio * tissue.youngs_modulus_pa,
-            tissue.youngs_modulus_pa,
-        )
+        E = ersatz_youngs_modulus(~removed, tissue.youngs_modulus_pa, tissue.ersatz_stiffness_ratio)
         solver = MechanicsSolver(
             mesh,
             E,

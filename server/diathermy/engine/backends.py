@@ -1,0 +1,90 @@
+"""The mechanics backend a scene asks for: FEM, the hybrid CNN, or hybrid PGD.
+
+Model files come from the scene (``mechanics.model``): a file path, else a name the caller's
+``ModelResolver`` knows (the CLI and the service hand in their model registry); the engine
+itself reads no registry, file or environment variable it was not handed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+from diathermy.engine.context import EngineContext
+from diathermy.errors import SceneError
+from diathermy.physics.mechanics_backend import FEMBackend, MechanicsBackend
+
+ModelResolver = Callable[[str | None, tuple[int, int, int]], Path]
+"""``(mechanics.model, grid) -> checkpoint``: a registry name (or None: the grid's default
+model) to the CNN checkpoint file; raises ``SceneError`` naming ``mechanics.model``."""
+
+PositionFn = Callable[[], "tuple[float, float] | None"]
+"""The position (x, y) in m of the active electrode during the coming step, None when off."""
+
+
+def shipped_models(model: str | None, grid: tuple[int, int, int]) -> Path:
+    """The resolver without a registry: a file path as given, else the shipped model of the grid."""
+    from diathermy.surrogates.backend import default_model_path
+
+    if model is None:
+        return default_model_path(grid)
+    if Path(model).is_file():
+        return Path(model)
+    raise SceneError(
+        f"mechanics.model: {model!r} is not a file, and no model registry was given to look "
+        "the name up in (the CLI and the service use the one of their data directory)"
+    )
+
+
+def make_backend(
+    ctx: EngineContext, *, models: ModelResolver | None, position: PositionFn
+) -> MechanicsBackend:
+    """The backend ``ctx.scene.mechanics`` asks for."""
+    cfg, tissue = ctx.scene.mechanics, ctx.tissue
+    if cfg.backend == "fem":
+        return FEMBackend(
+            ctx.disc.mesh,
+            poisson_ratio=tissue.poisson_ratio,
+            p0_pa=tissue.p_atm_pa,
+            rtol=cfg.rtol,
+            ersatz_ratio=tissue.ersatz_stiffness_ratio,
+        )
+    if cfg.backend == "cnn":
+        # torch loads only here: an FEM-only engine never imports it
+        from diathermy.surrogates.backend import CNNBackend
+
+        model = cfg.model
+        grid = tuple(ctx.scene.grid)
+        path = Path(model) if model is not None and Path(model).is_file() else None
+        if path is None:
+            path = (models or shipped_models)(model, grid)  # type: ignore[arg-type]
+        return CNNBackend(
+            ctx.disc.mesh,
+            path,
+            poisson_ratio=tissue.poisson_ratio,
+            p0_pa=tissue.p_atm_pa,
+            ersatz_ratio=tissue.ersatz_stiffness_ratio,
+            guard_tolerance=cfg.guard_tolerance,
+            correction=cfg.correction,
+            patch_threshold=cfg.patch_threshold,
+            patch_layers=cfg.patch_layers,
+        )
+    if cfg.backend == "pgd":
+        from diathermy.surrogates.pgd.backend import PGDBackend
+        from diathermy.surrogates.pgd.model import load_model
+
+        if not cfg.model:
+            raise SceneError(
+                "mechanics.backend 'pgd' needs mechanics.model: a PGD model file "
+                "(diathermy pgd-build)"
+            )
+        pgd = load_model(cfg.model, grid_shape=ctx.scene.grid, block_m=ctx.scene.block_m)
+        return PGDBackend(
+            pgd,
+            ctx.disc.mesh,
+            ctx.disc.grid,
+            enrich_tol=cfg.guard_tolerance,
+            position_fn=position,
+            rtol=cfg.rtol,
+        )
+    raise SceneError(f"mechanics.backend: unknown backend {cfg.backend!r}")

@@ -1,0 +1,105 @@
+"""Electric effect: the potential of the active electrodes' contact and its Joule heat.
+
+Reads temperature, vapor_fraction (desiccation), removed, level_set (contact height); writes
+potential and joule_heat, or hands the solve to the thermal effect (monolithic coupling).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from diathermy.engine.contact import combined, contact_key, drives_current
+from diathermy.engine.context import EngineContext
+from diathermy.engine.electrodes import ElectrodePose
+from diathermy.engine.report import EffectReport
+from diathermy.engine.state import ContactKey, SimulationState
+from diathermy.engine.step import MonolithicRequest, Outcome, Step
+from diathermy.physics.electric import ContactWeights, joule_heat
+from diathermy.physics.properties import nodes_to_tets
+from diathermy.physics.tissue_effects import electrical_conductivity
+
+NO_CONTACT = (
+    "no active electrode in contact with the tissue (off the block, or cut through "
+    "to the return electrode)"
+)
+
+
+def conductivity(ctx: EngineContext, state: SimulationState) -> np.ndarray:
+    """sigma per tet in S/m: the tissue's (or desiccation's law of T and x), removed tets ~0."""
+    t = ctx.tissue
+    if ctx.has("desiccation"):
+        sigma_n = electrical_conductivity(
+            state["temperature"], state["vapor_fraction"], t, ctx.conductivity_law
+        )
+        sigma = nodes_to_tets(sigma_n, ctx.disc.mesh.tets)
+    else:
+        sigma = np.full(ctx.disc.n_tets, t.sigma_s_per_m)
+    sigma[state["removed"]] = t.sigma_removed_s_per_m
+    return sigma
+
+
+def contacts(
+    ctx: EngineContext, state: SimulationState, step: Step
+) -> list[tuple[ElectrodePose, ContactKey, ContactWeights]]:
+    """The electrodes that drive current this step and touch the tissue, with their contact
+    disk (key and weights), in scene order."""
+    cut = ctx.has("dissection") and bool(state["removed"].any())
+    out = []
+    for pose in step.poses:
+        if not drives_current(pose):
+            continue
+        key = contact_key(ctx.disc, state, pose, top_z=ctx.top_z, cut=cut)
+        c = None if key is None else ctx.contacts.get(ctx.disc, key)
+        if c is not None and key is not None:
+            out.append((pose, key, c))
+    return out
+
+
+def skip(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome | None:
+    """Skipped (V = 0, q = 0) when no active electrode touches the tissue."""
+    if contacts(ctx, state, step):
+        return None
+    return Outcome(
+        EffectReport(False, NO_CONTACT),
+        fields={"potential": np.zeros(ctx.disc.n_nodes), "joule_heat": np.zeros(ctx.disc.n_tets)},
+        memory={"contacts": ()},
+    )
+
+
+def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
+    """Solve the potential (or reuse the unit-current one scaled to the drive)."""
+    found = contacts(ctx, state, step)
+    contact, drive = combined([(pose, c) for pose, _, c in found])
+    keys = tuple(k for _, k, _ in found)
+    sigma = conductivity(ctx, state)
+    if ctx.scene.solver.coupling == "monolithic" and ctx.has("thermal"):
+        return Outcome(
+            EffectReport(
+                True, "solved with the temperature by block-preconditioned GMRES (monolithic)"
+            ),
+            memory={"contacts": keys},
+            handoff={"monolithic": MonolithicRequest(sigma, contact, drive)},
+        )
+    sol = ctx.potential.solve(sigma, contact, drive)
+    fields = {
+        "potential": sol.V,
+        "joule_heat": joule_heat(ctx.disc.geom.grads, ctx.disc.mesh.tets, sigma, sol.V),
+    }
+    handoff = {"delivered_power_w": sol.power_w}
+    if sol.stats.cached:
+        report = EffectReport(
+            False,
+            "conductivity and contact unchanged: potential reused (scaled to the drive)",
+            extra={"current_a": sol.current_a},
+        )
+    else:
+        report = EffectReport(
+            True,
+            iterations=sol.stats.iterations,
+            extra={
+                "current_a": sol.current_a,
+                "residual": sol.stats.residual,
+                "reassembled": sol.stats.reassembled,
+            },
+        )
+    return Outcome(report, fields=fields, memory={"contacts": keys}, handoff=handoff)

@@ -1,0 +1,65 @@
+"""Mechanics effect: the displacement under the pore pressure, and its strain energy density.
+
+Reads pressure, removed, level_set, displacement (warm start); writes displacement and
+strain_energy; remembers the (pressure, removed) it solved for, so an unchanged load is reused.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from diathermy.engine.context import EngineContext
+from diathermy.engine.report import EffectReport
+from diathermy.engine.state import SimulationState
+from diathermy.engine.step import Outcome, Step
+from diathermy.physics.mechanics_backend import solve_with_cut
+
+
+def load_key(state: SimulationState) -> tuple[bytes, bytes]:
+    """What the displacement depends on: the pressure and the removed mask, as bytes."""
+    return (state["pressure"].tobytes(), state["removed"].tobytes())
+
+
+def skip(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome | None:
+    """Skipped with u = 0 when p = p0 everywhere, and reused when p and the cut are unchanged."""
+    if not np.any(state["pressure"] != ctx.tissue.p_atm_pa):
+        return Outcome(
+            EffectReport(False, "pressure is p0 everywhere: u = 0, W = 0"),
+            fields={
+                "displacement": np.zeros((ctx.disc.n_nodes, 3)),
+                "strain_energy": np.zeros(ctx.disc.n_tets),
+            },
+            memory={"mechanics_key": None},
+        )
+    if load_key(state) == state.memory.mechanics_key:
+        return Outcome(EffectReport(False, "pressure and topology unchanged: displacement reused"))
+    return None
+
+
+def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
+    """Solve the displacement with the scene's backend (removed tissue as ersatz material)."""
+    backend = ctx.mechanics
+    out, W = solve_with_cut(
+        backend,
+        pressure_pa=state["pressure"],
+        level_set_m=state["level_set"],
+        removed=state["removed"],
+        warm_start=state["displacement"],
+        tissue=ctx.tissue,
+        grads=ctx.disc.geom.grads,
+        tets=ctx.disc.mesh.tets,
+    )
+    return Outcome(
+        EffectReport(
+            True,
+            iterations=out.iterations,
+            extra={
+                "backend": backend.name,
+                "rebuilt": out.rebuilt,
+                "residual": out.residual,
+                **out.extra,
+            },
+        ),
+        fields={"displacement": out.u, "strain_energy": W},
+        memory={"mechanics_key": load_key(state)},
+    )
