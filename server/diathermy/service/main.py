@@ -41,15 +41,21 @@ def create_app(settings: Settings | None = None, *, engine: EngineAdapter | None
     state = AppState(
         settings=settings,
         tokens=TokenStore.from_settings(settings),
-        registry=SessionRegistry(settings.data_dir, engine or DefaultEngine()),
+        registry=SessionRegistry(
+            settings.data_dir, engine or DefaultEngine(), fsync=settings.journal_fsync
+        ),
         metrics=ServiceMetrics(),
+    )
+    sessions_ = state.registry.sessions
+    state.metrics.sessions.set_function(lambda: len(sessions_))
+    state.metrics.sessions_loaded.set_function(
+        lambda: sum(r.sim is not None for r in list(sessions_.values()))
     )
 
     @contextlib.asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
         state.tokens.warn_if_disabled()
         n = await anyio.to_thread.run_sync(state.registry.scan)
-        state.metrics.sessions.set(n)
         state.ready = True
         log.info("ready", extra={"sessions": n, "data_dir": str(settings.data_dir)})
         saver = asyncio.create_task(_autosave(state))

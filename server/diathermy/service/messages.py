@@ -10,6 +10,8 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
 
+from diathermy.service.limits import MAX_CURRENT_DENSITY_A_PER_M2, MAX_POWER_W
+
 
 class _Msg(BaseModel):
     model_config = ConfigDict(extra="forbid")
@@ -32,9 +34,13 @@ class ElectrodeControl(_Msg):
 
     type: Literal["electrode"]
     name: str = "active"
-    position_m: tuple[float, float] | None = None
-    power_w: float | None = Field(None, ge=0, allow_inf_nan=False)
-    current_density_a_per_m2: float | None = Field(None, ge=0, allow_inf_nan=False)
+    position_m: tuple[float, float] | None = Field(
+        None, description="(x, y) on the top surface, m, within the block"
+    )
+    power_w: float | None = Field(None, ge=0, le=MAX_POWER_W, allow_inf_nan=False)
+    current_density_a_per_m2: float | None = Field(
+        None, ge=0, le=MAX_CURRENT_DENSITY_A_PER_M2, allow_inf_nan=False
+    )
     active: bool | None = None
     tag: str | int | None = Field(None, description="echoed in the ack")
 
@@ -53,10 +59,11 @@ class Pause(_Msg):
 
 
 class Step(_Msg):
-    """Take ``n`` steps now (also while paused)."""
+    """Take ``n`` steps now (also while paused); steps queued at once are bounded by the server's
+    ``MAX_STEPS_PER_REQUEST`` (200 by default), the same limit as a REST step request."""
 
     type: Literal["step"]
-    n: int = Field(1, ge=1, le=1000)
+    n: int = Field(1, ge=1, description="at most MAX_STEPS_PER_REQUEST queued at once")
 
 
 ClientMessage = Annotated[
@@ -86,6 +93,10 @@ class Hello(BaseModel):
 class Ack(BaseModel):
     type: Literal["ack"]
     of: str = Field(description="the acknowledged message type")
+    step: int | None = Field(
+        description="the session's step when the message was applied (an electrode change "
+        "takes effect from step + 1)"
+    )
     control_id: int = Field(description="frames with control_id >= this reflect the message")
     tag: str | int | None = None
     running: bool
