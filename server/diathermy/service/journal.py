@@ -69,7 +69,9 @@ class Journal:
                 if i == len(lines) - 1:  # only an unterminated last line can be torn
                     log.warning("dropping a torn journal line", extra={"path": str(self.path)})
                     break
-                raise CheckpointError(f"journal {self.path.name}: line {i + 1} is corrupt") from None
+                raise CheckpointError(
+                    f"journal {self.path.name}: line {i + 1} is corrupt"
+                ) from None
             if int(entry["seq"]) > after:
                 out.append(entry)
         return out

@@ -18,6 +18,7 @@ import json
 import logging
 import os
 import shutil
+import threading
 import time
 import uuid
 from dataclasses import dataclass, field
@@ -79,6 +80,8 @@ class SessionRecord:
     driver: Any = None  # the stream driver (stream.SessionDriver) while clients are connected
     journal: Journal | None = None
     deleted: bool = False
+    waiting: int = 0  # tasks waiting for the lock: a stepping batch yields to them
+    interrupt: threading.Event = field(default_factory=threading.Event)
 
     @property
     def state_path(self) -> Path:

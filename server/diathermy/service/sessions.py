@@ -55,8 +55,17 @@ async def run_locked(
         raise SessionBusyError(
             f"session {rec.id} is busy with another step or restore; retry when it is done"
         )
-    async with rec.lock:
-        return await anyio.to_thread.run_sync(lambda: fn(registry.load(rec)))
+    rec.waiting += 1
+    rec.interrupt.set()  # a stream's stepping batch returns after the step in progress
+    counted = True
+    try:
+        async with rec.lock:
+            rec.waiting -= 1
+            counted = False
+            return await anyio.to_thread.run_sync(lambda: fn(registry.load(rec)))
+    finally:
+        if counted:
+            rec.waiting -= 1
 
 
 async def create_session(
@@ -244,9 +253,7 @@ async def delete_session(*, registry: SessionRegistry, rec: SessionRecord) -> No
     async with rec.lock:
         await anyio.to_thread.run_sync(lambda: registry.remove(rec))
     if rec.driver is not None:
-        await rec.driver.close_all(
-            4404, "not_found", f"session {rec.id} was deleted", "session_id"
-        )
+        await rec.driver.close_all(4404, "not_found", f"session {rec.id} was deleted", "session_id")
 
 
 async def save_dirty(*, registry: SessionRegistry, wait: bool) -> int:

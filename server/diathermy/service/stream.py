@@ -1,10 +1,8 @@
-"""The WebSocket stream of a session: subscriptions, control messages, and the stepping driver.
+"""The WebSocket stream of a session: subscriptions and control messages (``driver.py`` steps).
 
-One ``SessionDriver`` per session steps it while any client asked it to run (at the requested
-rate, capped by the server) and takes single steps on request; every step is published to all
-subscribers through their one-frame slots. Protocol errors close the socket with code 4400 and a
-JSON reason; a rejected value (an unknown electrode, a position off the block) only answers with
-an ``error`` message.
+Every step is published to all subscribers through their one-frame slots. Protocol errors close
+the socket with code 4400 and a JSON reason, after an ``error`` message; a rejected value (an
+unknown electrode, a position off the block) only answers with an ``error`` message.
 """
 
 from __future__ import annotations
@@ -23,9 +21,10 @@ from starlette.websockets import WebSocket, WebSocketDisconnect, WebSocketState
 
 from diathermy.errors import DiathermyError
 from diathermy.scene.io import describe_validation_error
+from diathermy.service.driver import SessionDriver, driver_of
 from diathermy.service.encoding import pack, unpack
 from diathermy.service.errors import classify
-from diathermy.service.exceptions import BadRequestError, LimitExceededError
+from diathermy.service.exceptions import BadRequestError
 from diathermy.service.hub import Frame, FrameSlot, Subscriber, Subscription, current_frame
 from diathermy.service.messages import (
     ElectrodeControl,
@@ -37,7 +36,7 @@ from diathermy.service.messages import (
 )
 from diathermy.service.registry import SessionRecord
 from diathermy.service.schemas import ElectrodeUpdate
-from diathermy.service.sessions import advance, run_locked, update_electrode
+from diathermy.service.sessions import run_locked, update_electrode
 from diathermy.service.state import AppState
 
 log = logging.getLogger("diathermy.service.stream")
@@ -53,114 +52,6 @@ MAX_PENDING_REPLIES = 64
 
 class ControlFloodError(BadRequestError):
     """The client sends control messages faster than it reads the replies."""
-
-
-class SessionDriver:
-    """Steps one session for its stream clients: continuously at a rate, or n steps on demand."""
-
-    def __init__(self, rec: SessionRecord, state: AppState) -> None:
-        self.rec = rec
-        self.state = state
-        self.running = False
-        self.rate_hz = 10.0
-        self.pending = 0
-        self.clients: dict[Subscriber, StreamConnection] = {}
-        self._wake = asyncio.Event()
-        self._task: asyncio.Task[None] | None = None
-
-    def attach(self, sub: Subscriber, conn: StreamConnection) -> None:
-        self.clients[sub] = conn
-        self.rec.hub.add(sub)
-        if self._task is None:
-            self._task = asyncio.create_task(self._loop(), name=f"driver-{self.rec.id}")
-
-    async def detach(self, sub: Subscriber) -> None:
-        self.clients.pop(sub, None)
-        self.rec.hub.remove(sub)
-        if not self.clients:
-            await self.stop()
-
-    async def stop(self) -> None:
-        """Stop stepping and end the task (the last client left, or the session is deleted)."""
-        self.running = False
-        self.pending = 0
-        if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
-            self._task = None
-        if self.rec.driver is self:
-            self.rec.driver = None
-
-    def run(self, rate_hz: float) -> None:
-        self.rate_hz = min(rate_hz, self.state.settings.max_stream_rate_hz)
-        self.running = True
-        self._wake.set()
-
-    def pause(self) -> None:
-        self.running = False
-
-    def step(self, n: int) -> None:
-        """Queue ``n`` more steps; the steps queued at once are bounded like a REST request."""
-        limit = self.state.settings.max_steps_per_request
-        if self.pending + n > limit:
-            raise LimitExceededError(
-                f"{n} more steps would queue {self.pending + n}, over the limit of {limit} "
-                "steps per request",
-                field="n",
-            )
-        self.pending += n
-        self._wake.set()
-
-    async def _broadcast(self, msg: dict[str, Any]) -> None:
-        for conn in list(self.clients.values()):
-            with contextlib.suppress(Exception):
-                await conn.send(msg)
-
-    async def close_all(self, code: int, error: str, message: str, field: str | None) -> None:
-        """Stop stepping, send every client an ``error`` and close its socket (session deleted)."""
-        await self.stop()
-        for conn in list(self.clients.values()):
-            await conn.close(code, error, message, field)
-
-    async def _loop(self) -> None:
-        next_t = time.monotonic()
-        while True:
-            if not self.running and self.pending == 0:
-                self._wake.clear()
-                await self._wake.wait()
-                next_t = time.monotonic()
-                continue
-            try:
-                await run_locked(
-                    self.rec,
-                    self.state.registry,
-                    lambda sim: advance(
-                        self.rec, self.state.registry, sim, 1, self.state.metrics
-                    ),
-                )
-            except DiathermyError as err:
-                self.running, self.pending = False, 0
-                _, code, field = classify(err)
-                await self._broadcast(
-                    {"type": "error", "error": code, "message": str(err), "field": field}
-                )
-                continue
-            if self.pending:
-                self.pending -= 1
-                await asyncio.sleep(0)
-            elif self.running:
-                next_t += 1.0 / self.rate_hz
-                delay = next_t - time.monotonic()
-                if delay < 0:
-                    next_t, delay = time.monotonic(), 0.0
-                await asyncio.sleep(delay)
-
-
-def driver_of(rec: SessionRecord, state: AppState) -> SessionDriver:
-    if rec.driver is None:
-        rec.driver = SessionDriver(rec, state)
-    return rec.driver
 
 
 def parse_message(raw: Mapping[str, Any]) -> Any:
