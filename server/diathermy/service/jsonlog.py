@@ -18,7 +18,7 @@ class JsonFormatter(logging.Formatter):
             + f".{int(record.msecs):03d}Z",
             "level": record.levelname,
             "logger": record.name,
-            "message": record.getMessage(),
+            "message": record.getMessage().rstrip("\n"),
         }
         for key, value in vars(record).items():
             if key not in _STANDARD and not key.startswith("_"):

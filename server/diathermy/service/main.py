@@ -30,7 +30,7 @@ async def _autosave(state: AppState) -> None:
     while True:
         await asyncio.sleep(state.settings.autosave_interval_s)
         try:
-            await save_dirty(registry=state.registry, wait=False)
+            await save_dirty(registry=state.registry)
         except Exception:
             log.exception("autosave failed")
 
@@ -67,7 +67,7 @@ def create_app(settings: Settings | None = None, *, engine: EngineAdapter | None
             for rec in list(state.registry.sessions.values()):
                 if rec.driver is not None:
                     await rec.driver.stop()
-            saved = await save_dirty(registry=state.registry, wait=True)
+            saved = await save_dirty(registry=state.registry)
             log.info("stopped", extra={"saved_sessions": saved})
 
     app = FastAPI(

@@ -19,7 +19,10 @@ class SessionCreate(_In):
 
     model_config = ConfigDict(
         extra="forbid",
-        json_schema_extra={"examples": [{"builtin": "default", "grid": [5, 5, 9]}]},
+        json_schema_extra={
+            "examples": [{"builtin": "default", "grid": [5, 5, 9]}],
+            "oneOf": [{"required": ["scene"]}, {"required": ["builtin"]}],
+        },
     )
 
     scene: Scene | None = Field(None, description="an inline scene")
@@ -73,7 +76,12 @@ class SessionList(BaseModel):
 class StepRequest(_In):
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"n": 2}]})
 
-    n: int = Field(1, ge=1, description="steps to take (bounded by the server's limit)")
+    n: int = Field(
+        1,
+        ge=1,
+        description="steps to take; at most the server's MAX_STEPS_PER_REQUEST (200 by default), "
+        "else 422 limit_exceeded",
+    )
 
 
 class StepResult(BaseModel):

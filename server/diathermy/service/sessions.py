@@ -7,9 +7,10 @@ event loop or other sessions. A step or restore on a session that is busy raises
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import tempfile
-from collections.abc import Callable
+from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -55,14 +56,21 @@ async def run_locked(
         raise SessionBusyError(
             f"session {rec.id} is busy with another step or restore; retry when it is done"
         )
+    async with session_lock(rec):
+        return await anyio.to_thread.run_sync(lambda: fn(registry.load(rec)))
+
+
+@contextlib.asynccontextmanager
+async def session_lock(rec: SessionRecord) -> AsyncIterator[None]:
+    """Hold the session lock; a stream's stepping batch yields it after the step in progress."""
     rec.waiting += 1
-    rec.interrupt.set()  # a stream's stepping batch returns after the step in progress
+    rec.interrupt.set()
     counted = True
     try:
         async with rec.lock:
             rec.waiting -= 1
             counted = False
-            return await anyio.to_thread.run_sync(lambda: fn(registry.load(rec)))
+            yield
     finally:
         if counted:
             rec.waiting -= 1
@@ -250,20 +258,22 @@ async def restore_snapshot(
 
 async def delete_session(*, registry: SessionRegistry, rec: SessionRecord) -> None:
     """Remove a session from memory and disk; its stream clients get an error and a close."""
-    async with rec.lock:
+    rec.deleted = True  # refuses new work and ends a stepping batch
+    async with session_lock(rec):
         await anyio.to_thread.run_sync(lambda: registry.remove(rec))
     if rec.driver is not None:
         await rec.driver.close_all(4404, "not_found", f"session {rec.id} was deleted", "session_id")
 
 
-async def save_dirty(*, registry: SessionRegistry, wait: bool) -> int:
-    """Checkpoint every loaded session that changed; skips busy ones unless ``wait``."""
+async def save_dirty(*, registry: SessionRegistry) -> int:
+    """Checkpoint every loaded session that changed, compacting its journal (also while it is
+    streamed: the stepping batch yields the lock after the step in progress)."""
     saved = 0
     for rec in list(registry.sessions.values()):
-        if rec.sim is None or not rec.dirty or (not wait and rec.lock.locked()):
+        if rec.sim is None or not rec.dirty:
             continue
-        async with rec.lock:
-            if rec.id in registry.sessions:
+        async with session_lock(rec):
+            if rec.id in registry.sessions and not rec.deleted:
                 await anyio.to_thread.run_sync(registry.save, rec)
                 saved += 1
     return saved
