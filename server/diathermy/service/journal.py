@@ -40,6 +40,7 @@ class Journal:
         self.path = path
         self.seq = seq
         self.fsync = fsync
+        self.torn = False  # the last read found a line cut short (rewrite before appending)
 
     def append(self, op: str, **data: Any) -> int:
         """Write one entry and return its sequence number (engine thread, under the lock)."""
@@ -68,6 +69,7 @@ class Journal:
             except ValueError:
                 if i == len(lines) - 1:  # only an unterminated last line can be torn
                     log.warning("dropping a torn journal line", extra={"path": str(self.path)})
+                    self.torn = True
                     break
                 raise CheckpointError(
                     f"journal {self.path.name}: line {i + 1} is corrupt"

@@ -165,6 +165,8 @@ class SessionRegistry:
             sim = self.engine.load(rec.state_path)
             journal = Journal(rec.journal_path, seq=seq, fsync=self.fsync)
             entries = journal.entries(after=seq)
+            if journal.torn:  # rewrite without the cut-short line before appending after it
+                journal.compact(seq)
             steps = replay(sim, entries)
             journal.seq = max([seq, *(int(e["seq"]) for e in entries)])
             rec.sim, rec.journal = sim, journal
