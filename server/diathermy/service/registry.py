@@ -81,6 +81,7 @@ class SessionRecord:
     journal: Journal | None = None
     deleted: bool = False
     waiting: int = 0  # tasks waiting for the lock: a stepping batch yields to them
+    exclusive: bool = False  # a REST step or restore is queued or running (a second gets 409)
     interrupt: threading.Event = field(default_factory=threading.Event)
 
     @property

@@ -49,15 +49,25 @@ async def run_locked(
     *,
     wait: bool = True,
 ) -> T:
-    """Run ``fn(sim)`` in a worker thread under the session lock (loading the session first)."""
+    """Run ``fn(sim)`` in a worker thread under the session lock (loading the session first).
+
+    ``wait=False`` marks a step or restore: a second one while the first is queued or running
+    is refused with ``SessionBusyError`` (409); autosaves, reads and stream steps only delay it.
+    """
     if rec.deleted:
         raise SessionNotFoundError(f"session {rec.id} was deleted", field="session_id")
-    if not wait and rec.lock.locked():
-        raise SessionBusyError(
-            f"session {rec.id} is busy with another step or restore; retry when it is done"
-        )
-    async with session_lock(rec):
-        return await anyio.to_thread.run_sync(lambda: fn(registry.load(rec)))
+    if not wait:
+        if rec.exclusive:
+            raise SessionBusyError(
+                f"session {rec.id} is busy with another step or restore; retry when it is done"
+            )
+        rec.exclusive = True
+    try:
+        async with session_lock(rec):
+            return await anyio.to_thread.run_sync(lambda: fn(registry.load(rec)))
+    finally:
+        if not wait:
+            rec.exclusive = False
 
 
 @contextlib.asynccontextmanager
