@@ -4,8 +4,9 @@ While running, the engine steps in a worker thread that keeps the session lock f
 as it can: it paces itself to the requested rate there and returns only when paused or when
 something else waits for the session (an electrode control, a REST read, a subscription), which
 then runs before the next step. So the engine's rate does not depend on the event loop, which
-only writes frames to sockets, and a control waits at most for the step in progress. Steps asked
-for with ``step`` are taken one per batch, so that a client reading at once gets every frame.
+only writes frames to sockets. Electrode controls do not stop the batch: they are handed to it and
+applied between two steps, so a control waits at most for the step in progress. Steps asked for
+with ``step`` are taken one per batch, so that a client reading at once gets every frame.
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ class SessionDriver:
         self._wake = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
         self._next_t = 0.0
+        self._loop_ref = asyncio.get_running_loop()
 
     def attach(self, sub: Subscriber, conn: StreamConnection) -> None:
         self.clients[sub] = conn
@@ -107,10 +109,26 @@ class SessionDriver:
     def _batch(self, sim: Any) -> bool:
         """Step while there is work and nobody else waits for the session (engine thread).
 
-        Returns True after taking one requested step (the event loop counts it off)."""
+        Electrode controls offered meanwhile (``SessionRecord.offer``) are applied between
+        steps. Returns True after taking one requested step (the event loop counts it off)."""
+        rec = self.rec
+        with rec.batch_lock:
+            rec.batch_active = True
+        try:
+            return self._steps(sim)
+        finally:
+            while True:  # apply what was offered before the batch ends, then stop taking more
+                self._apply_controls(sim)
+                with rec.batch_lock:
+                    if not rec.controls:
+                        rec.batch_active = False
+                        break
+
+    def _steps(self, sim: Any) -> bool:
         rec, interrupt = self.rec, self.rec.interrupt
         while rec.waiting == 0 and not rec.deleted:
             interrupt.clear()
+            self._apply_controls(sim)
             if self.pending:  # requested steps: one per batch, so that each frame goes out
                 advance(rec, self.state.registry, sim, 1, self.state.metrics)
                 return True
@@ -124,6 +142,21 @@ class SessionDriver:
                 return False
             advance(rec, self.state.registry, sim, 1, self.state.metrics)
         return False
+
+    def _apply_controls(self, sim: Any) -> None:
+        """Run the offered controls in order and hand each its result (engine thread)."""
+        loop = self._loop_ref
+        while True:
+            with self.rec.batch_lock:
+                if not self.rec.controls:
+                    return
+                fn, fut = self.rec.controls.popleft()
+            try:
+                result = fn(sim)
+            except Exception as err:
+                loop.call_soon_threadsafe(_settle, fut, None, err)
+            else:
+                loop.call_soon_threadsafe(_settle, fut, result, None)
 
     async def _loop(self) -> None:
         while True:
@@ -141,6 +174,15 @@ class SessionDriver:
                     {"type": "error", "error": code, "message": str(err), "field": field}
                 )
             await asyncio.sleep(0)  # whoever interrupted the batch has the lock next (FIFO)
+
+
+def _settle(fut: asyncio.Future[Any], result: Any, err: BaseException | None) -> None:
+    if fut.done():  # the waiter was cancelled (its client left)
+        return
+    if err is not None:
+        fut.set_exception(err)
+    else:
+        fut.set_result(result)
 
 
 def driver_of(rec: SessionRecord, state: AppState) -> SessionDriver:

@@ -18,7 +18,8 @@ class _Msg(BaseModel):
 
 
 class Subscribe(_Msg):
-    """Choose what frames carry; replaces the previous subscription."""
+    """Choose what frames carry; replaces the previous subscription. Answered by an ``ack``,
+    then a frame of the current state (in that order)."""
 
     type: Literal["subscribe"]
     fields: list[str] = Field(default_factory=list, max_length=16)
@@ -139,7 +140,18 @@ def stream_messages_schema() -> dict[str, Any]:
         "$id": "https://diathermy.dev/schema/stream-messages-v1.json",
         "title": "diathermy stream messages (v1)",
         "description": "Messages of /v1/sessions/{id}/stream. Client messages are JSON text or "
-        "msgpack binary; server messages are msgpack binary ('bytes' values are msgpack bin).",
+        "msgpack binary; server messages are msgpack binary ('bytes' values are msgpack bin). "
+        "Every close the server makes is preceded by an 'error' message and has the same error "
+        "as a JSON close reason, except 1009, which the WebSocket layer sends with a plain-text "
+        "reason (see x-close-codes).",
+        "x-close-codes": {
+            "1008": "too_many_messages: over 64 replies unread (control messages flood)",
+            "1009": "a message over MAX_MESSAGE_BYTES (plain-text reason, no error message)",
+            "1011": "the session could not be loaded, e.g. checkpoint_error",
+            "4400": "bad_message: not JSON/msgpack, unknown type, invalid or out-of-range value",
+            "4401": "unauthorized: missing or unknown token",
+            "4404": "not_found: no such session for this token, or it was deleted",
+        },
         "client_to_server": TypeAdapter(ClientMessage).json_schema(),
         "server_to_client": TypeAdapter(ServerMessage).json_schema(),
     }

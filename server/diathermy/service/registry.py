@@ -21,6 +21,8 @@ import shutil
 import threading
 import time
 import uuid
+from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -82,6 +84,9 @@ class SessionRecord:
     deleted: bool = False
     waiting: int = 0  # tasks waiting for the lock: a stepping batch yields to them
     exclusive: bool = False  # a REST step or restore is queued or running (a second gets 409)
+    batch_active: bool = False  # a stream's stepping batch holds the lock (driver.py)
+    controls: deque[tuple[Callable[[Any], Any], asyncio.Future[Any]]] = field(default_factory=deque)
+    batch_lock: threading.Lock = field(default_factory=threading.Lock)
     interrupt: threading.Event = field(default_factory=threading.Event)
 
     @property
@@ -98,6 +103,17 @@ class SessionRecord:
     @property
     def journal_path(self) -> Path:
         return self.directory / "journal.jsonl"
+
+    def offer(self, fn: Callable[[Any], Any]) -> asyncio.Future[Any] | None:
+        """Hand ``fn(sim)`` to the running stepping batch, which applies it before its next
+        step (no lock hand-over); None when no batch runs (then take the lock instead)."""
+        with self.batch_lock:
+            if not self.batch_active:
+                return None
+            fut = asyncio.get_running_loop().create_future()
+            self.controls.append((fn, fut))
+        self.interrupt.set()
+        return fut
 
     def write_meta(self) -> None:
         _write_json_atomic(self.meta_path, self.meta)

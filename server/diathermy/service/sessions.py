@@ -186,6 +186,12 @@ async def update_electrode(
         rec.control_id += 1
         return rec.control_id, int(sim.step_index)
 
+    if rec.deleted:
+        raise SessionNotFoundError(f"session {rec.id} was deleted", field="session_id")
+    offered = rec.offer(apply)  # a stream is stepping: applied between two of its steps
+    if offered is not None:
+        result: tuple[int, int] = await offered
+        return result
     return await run_locked(rec, registry, apply)
 
 
