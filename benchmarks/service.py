@@ -193,13 +193,23 @@ def warm_session(server: Server, grid: list[int]) -> str:
 
 
 def engine_alone(server: Server, sid: str, seconds: float) -> float:
-    """Steps/s of a session stepped over REST with no stream client (the engine's own rate)."""
+    """Steps/s of a session stepped over REST with no stream client (the engine's own rate);
+    requests of about a second each, so that HTTP costs next to nothing per step."""
+    t = time.monotonic()
+    server.http.post(f"/v1/sessions/{sid}/step", json={"n": 5}).raise_for_status()
+    n = max(2, min(200, round(5 / (time.monotonic() - t))))
     t0 = time.monotonic()
     steps = 0
     while time.monotonic() - t0 < seconds or steps < 10:
-        server.http.post(f"/v1/sessions/{sid}/step", json={"n": 5}).raise_for_status()
-        steps += 5
+        server.http.post(f"/v1/sessions/{sid}/step", json={"n": n}).raise_for_status()
+        steps += n
     return steps / (time.monotonic() - t0)
+
+
+def cpu_s(pid: int) -> float:
+    """CPU seconds (user + system, all threads) a process has used."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def grid_rows(
@@ -215,14 +225,19 @@ def grid_rows(
             if n == 0:
                 alone.append(engine_alone(server, sid, seconds))
             else:
+                c0, s0, t0 = cpu_s(os.getpid()), cpu_s(server.proc.pid), time.monotonic()
                 runs[n].append(asyncio.run(fan_out(server, sid, n, seconds, 1000.0)))
+                wall = time.monotonic() - t0
+                runs[n][-1]["server_cpu"] = (cpu_s(server.proc.pid) - s0) / wall
+                runs[n][-1]["client_cpu"] = (cpu_s(os.getpid()) - c0) / wall
                 runs[n][-1]["vs_alone"] = runs[n][-1]["steps_per_s"] / alone[-1]
             print(n, alone[-1] if n == 0 else runs[n][-1], flush=True)
             server.http.delete(f"/v1/sessions/{sid}")
     rows = []
     for n in clients:
         row: dict[str, Any] = {"clients": n, "reps": reps}
-        for key in ("steps_per_s", "fps_per_client", "p50_ms", "p99_ms", "vs_alone"):
+        keys = ("steps_per_s", "fps_per_client", "p50_ms", "p99_ms", "vs_alone")
+        for key in (*keys, "server_cpu", "client_cpu"):
             row[key] = statistics.median(r[key] for r in runs[n])
         row["samples"] = sum(r["samples"] for r in runs[n])
         row["dropped"] = sum(r["dropped"] for r in runs[n])
@@ -323,8 +338,9 @@ def fan_table(grid: str, alone: float, fan: list[dict[str, Any]]) -> list[str]:
         f"({1e3 / alone:.1f} ms per step), median of {fan[0]['reps']} runs.",
         "",
         "| clients | steps/s | vs alone | frames/s per client | per client / steps/s | "
-        "latency p50 ms | latency p99 ms | p99 bound ms | samples | frames dropped | targets |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+        "latency p50 ms | latency p99 ms | p99 bound ms | samples | frames dropped | "
+        "CPU server / clients | targets |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
     for r in fan:
         bound = r["p99_bound_ms"]
@@ -345,7 +361,7 @@ def fan_table(grid: str, alone: float, fan: list[dict[str, Any]]) -> list[str]:
             f"| {r['clients']} | {r['steps_per_s']:.1f} | {r['vs_alone']:.2f} | "
             f"{r['fps_per_client']:.1f} | {r['fps_per_client'] / r['steps_per_s']:.2f} | "
             f"{r['p50_ms']:.1f} | {r['p99_ms']:.1f} | {bound:.0f} | {r['samples']} | "
-            f"{r['dropped']} | {verdict} |"
+            f"{r['dropped']} | {r['server_cpu']:.2f} / {r['client_cpu']:.2f} | {verdict} |"
         )
     return lines + [""]
 
@@ -373,7 +389,9 @@ def write_report(
         "row is the median of the repetitions; the configurations run interleaved (alone, 1, 4, "
         "16, alone, ...) on fresh sessions, and *vs alone* is the median of each run's ratio to "
         "the alone run just before it, so that the shared machine's drifting load cancels. "
-        "Latency: from sending an "
+        "CPU: cores used by the server process and by the benchmark's client process during "
+        "the row (the clients decode every frame in Python and share the cores with the "
+        "server). Latency: from sending an "
         "electrode control message to the first frame whose `control_id` shows it applied; "
         "every client sends one every 0.25 s. Frames dropped: coalesced for clients that fell "
         "behind (summed). Targets: frames/s per client >= 0.9 x steps/s, steps/s with 16 "
