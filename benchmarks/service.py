@@ -385,7 +385,8 @@ def write_report(
         "",
         "One client sends `run` at 1000 steps/s (more than the engine can do: the session steps "
         "as fast as it goes); all subscribe to the same fields. *Engine alone* is the same "
-        "server stepping a session over REST (5 steps a request) with no client streaming. Each "
+        "server stepping a session over REST (requests of about a second of steps) with no "
+        "client streaming. Each "
         "row is the median of the repetitions; the configurations run interleaved (alone, 1, 4, "
         "16, alone, ...) on fresh sessions, and *vs alone* is the median of each run's ratio to "
         "the alone run just before it, so that the shared machine's drifting load cancels. "
@@ -398,20 +399,31 @@ def write_report(
         "clients >= 0.9 x alone, p99 <= 2 step times + 20 ms (a control waits for the step in "
         "progress, then its own step).",
         "",
-        "Built-in scene `default` (50 W, all default effects) on a smaller grid than its "
-        "33x33x65, and on that grid: in these seconds the tissue does not reach boiling, so the "
-        "electric solve is reused and mechanics is skipped; steps/s is the service's ceiling "
-        "with the real engine's thermal step (a cutting scene steps far slower).",
+        "Scene: the built-in `default` (50 W) with only its electric and thermal effects, on "
+        "17x17x33 and on its own 33x33x65 grid: a steady cost per step, so that rows compare "
+        "like with like (with vaporization and mechanics a step costs ~100x more once the "
+        "tissue boils, which happens within a row). Frames carry temperature and displacement "
+        "(float32 volume).",
         "",
     ]
     for grid, alone, fan in tables:
         lines += fan_table(grid, alone, fan)
     lines += [
-        "How: the engine steps in a worker thread; after each step the frame is built and "
-        "msgpack-encoded there once per distinct subscription, and the event loop only prefixes "
-        "each client's `dropped` counter and writes the bytes (no per-message compression: "
-        "float fields barely compress and deflating a frame per client cost more than the "
-        "step). Every step is journalled before its frame goes out (`journal.py`).",
+        "How: the engine steps in a worker thread that keeps stepping until something else "
+        "needs the session (electrode controls are applied between two of its steps); after "
+        "each step the frame is built and msgpack-encoded there once per distinct subscription, "
+        "and the event loop only prefixes each client's `dropped` counter and writes the bytes "
+        "(no per-message compression: float fields barely compress and deflating a frame per "
+        "client cost more than the step). Every step is journalled before its frame goes out "
+        "(`journal.py`).",
+        "",
+        "Reading the 16-client rows: every step moves 16 x the frame over loopback (150 kB "
+        "on 17x17x33, 1.2 MB on 33x33x65). On 2 cores shared with other jobs, the kernel's "
+        "copies, the clients' reads and the event loop's writes take CPU (and GIL) time from "
+        "the engine thread: the server process gets less than one core (CPU column) and each "
+        "step takes longer, while frames per client keep up with the steps. A profile "
+        "(py-spy, 16 clients, 17x17x33) showed the engine thread busy 97 % of the time and "
+        "the event loop 26 %, mostly in the socket write.",
         "",
         "## Bytes per frame",
         "",
