@@ -188,6 +188,8 @@ class AsyncStream:
         """Read ``hello``, then send the subscription (and ``run`` after a reconnect)."""
         try:
             first = self._sc.decode(await asyncio.wait_for(ws.recv(), self._timeout_s))
+            if isinstance(first, StreamError):  # the server explains a close, then closes
+                first = self._sc.decode(await asyncio.wait_for(ws.recv(), self._timeout_s))
         except ConnectionClosed as err:
             code, reason = _close_of(err)
             raise self._sc.close_error(code, reason) or self._sc.closed_error(

@@ -300,6 +300,7 @@ class Ack(_Result):
 
     type: Literal["ack"]
     of: str
+    step: int | None = None  # the session's step when the message was applied
     control_id: int
     tag: str | int | None = None
     running: bool

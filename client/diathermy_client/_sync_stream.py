@@ -202,6 +202,8 @@ class Stream:
         """Read ``hello``, then send the subscription (and ``run`` after a reconnect)."""
         try:
             first = self._sc.decode(ws.recv(timeout=self._timeout_s))
+            if isinstance(first, StreamError):  # the server explains a close, then closes
+                first = self._sc.decode(ws.recv(timeout=self._timeout_s))
         except ConnectionClosed as err:
             code, reason = _close_of(err)
             raise self._sc.close_error(code, reason) or self._sc.closed_error(

@@ -37,9 +37,9 @@ def test_error_types_from_a_live_server(live: LiveServer, client: Client) -> Non
     with pytest.raises(InvalidRequest) as bad_value:
         s.set_power(-1.0)
     assert bad_value.value.field == "body.power_w" and bad_value.value.status == 422
-    with pytest.raises(InvalidRequest) as bad_name:
+    with pytest.raises(NotFound) as bad_name:  # a missing electrode is a missing resource
         s.set_electrode("ghost", power_w=1.0)
-    assert bad_name.value.field == "name"
+    assert bad_name.value.field == "name" and bad_name.value.status == 404
     with pytest.raises(InvalidRequest) as bad_field:
         s.fields(["temperature", "nope"])
     assert bad_field.value.status == 400 and bad_field.value.field == "fields"

@@ -56,6 +56,7 @@ class LiveServer:
             host="127.0.0.1",
             port=settings.port,
             ws="websockets-sansio",
+            ws_per_message_deflate=False,
             ws_max_size=settings.max_message_bytes,
             log_config=None,
             access_log=False,

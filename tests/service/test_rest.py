@@ -170,7 +170,7 @@ def test_bad_reads_are_4xx(api: httpx.Client) -> None:
     r = api.get(f"/v1/sessions/{sid}/fields", params={"fields": "temperature", "dtype": "int8"})
     assert r.status_code == 422 and r.json()["field"] == "query.dtype"
     r = api.patch(f"/v1/sessions/{sid}/electrodes/ghost", json={"power_w": 1})
-    assert r.status_code == 422 and r.json()["field"] == "name"
+    assert r.status_code == 404 and r.json()["field"] == "name"  # a missing resource
     r = api.patch(f"/v1/sessions/{sid}/electrodes/active", json={"power_w": -1})
     assert r.status_code == 422 and r.json()["field"] == "body.power_w"
     assert api.get("/v1/nothing").json()["error"] == "not_found"

@@ -188,10 +188,14 @@ def test_rejected_values_keep_the_stream_open(live: LiveServer, sid: str) -> Non
 
 
 def test_stream_auth(live: LiveServer, sid: str) -> None:
-    for token, code in [("wrong", 4401), (TOKEN_B, 4404)]:
-        with open_stream(live, sid, token=token) as ws, pytest.raises(ConnectionClosed) as info:
-            recv(ws)
+    for token, code, error in [("wrong", 4401, "unauthorized"), (TOKEN_B, 4404, "not_found")]:
+        with open_stream(live, sid, token=token) as ws:
+            msg = recv(ws)  # an error message comes before the close, as for every close
+            assert msg["type"] == "error" and msg["error"] == error
+            with pytest.raises(ConnectionClosed) as info:
+                recv(ws)
         assert info.value.rcvd is not None and info.value.rcvd.code == code
+        assert json.loads(info.value.rcvd.reason)["error"] == error
     with connect(f"{live.ws_url}/v1/sessions/{sid}/stream?token={TOKEN_A}") as ws:
         assert recv(ws)["type"] == "hello"
 

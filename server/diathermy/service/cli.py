@@ -42,6 +42,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         host=settings.host,
         port=settings.port,
         ws="websockets-sansio",
+        ws_per_message_deflate=False,  # frames are encoded once per subscription, sent as is
         ws_max_size=settings.max_message_bytes,
         log_config=None,
         access_log=False,

@@ -42,6 +42,11 @@ class Settings(BaseSettings):
     autosave_interval_s: float = Field(
         default=30.0, gt=0, description="checkpoint sessions this often"
     )
+    journal_fsync: bool = Field(
+        default=False,
+        description="fsync the session journal after every command: survives power loss too, "
+        "not only a killed process, at the cost of one disk sync per step",
+    )
     log_level: str = "INFO"
 
     @field_validator("tokens", mode="before")

@@ -9,6 +9,7 @@ from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match
 
 from diathermy.errors import (
     CheckpointError,
@@ -95,12 +96,40 @@ async def _validation_error(_request: Request, err: Exception) -> JSONResponse:
     )
 
 
-async def _http_error(_request: Request, err: Exception) -> JSONResponse:
+HTTP_CODES = {
+    400: "bad_request",
+    401: "unauthorized",
+    404: "not_found",
+    405: "method_not_allowed",
+    413: "too_large",
+    422: "validation_error",
+}
+"""Error codes of the routing and body-parsing errors FastAPI raises itself (others: bad_request)."""
+
+
+def allowed_methods(request: Request) -> list[str]:
+    """Every method some route serves at this path (a 405's ``Allow`` header)."""
+    return [
+        method
+        for method in ("DELETE", "GET", "HEAD", "PATCH", "POST", "PUT")
+        if any(
+            route.matches({**request.scope, "type": "http", "method": method})[0] == Match.FULL
+            for route in request.app.router.routes
+        )
+    ]
+
+
+async def _http_error(request: Request, err: Exception) -> JSONResponse:
     assert isinstance(err, StarletteHTTPException)
-    code = {404: "not_found", 405: "method_not_allowed"}.get(err.status_code, "http_error")
-    return JSONResponse(
-        error_body(code, str(err.detail)), status_code=err.status_code, headers=err.headers
-    )
+    status = err.status_code
+    code = HTTP_CODES.get(status, "bad_request" if status < 500 else "internal")
+    headers = dict(err.headers or {})
+    message = str(err.detail)
+    if status == 405:
+        allow = allowed_methods(request)
+        headers["Allow"] = ", ".join(allow)
+        message = f"{request.method} is not allowed here; allowed: {', '.join(allow)}"
+    return JSONResponse(error_body(code, message), status_code=status, headers=headers or None)
 
 
 async def _unexpected(request: Request, err: Exception) -> JSONResponse:
@@ -124,7 +153,7 @@ ErrorResponses: dict[int | str, dict[str, object]] = {
     for status, desc in [
         (400, "bad request (e.g. an unknown field name)"),
         (401, "missing or unknown bearer token"),
-        (404, "no such session (job, model) for this token"),
+        (404, "no such session (job, model, electrode, snapshot) for this token"),
         (409, "the session is busy stepping or restoring"),
         (413, "request body too large"),
         (422, "invalid input or over a limit; 'field' names it"),
@@ -132,3 +161,9 @@ ErrorResponses: dict[int | str, dict[str, object]] = {
     ]
 }
 """The error responses every session route documents."""
+
+
+AuthResponses: dict[int | str, dict[str, object]] = {
+    401: {"model": ErrorPublic, "description": "missing or unknown bearer token"}
+}
+"""The error response of a route that only needs a token."""

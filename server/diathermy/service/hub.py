@@ -1,21 +1,24 @@
 """Fan-out of step frames to stream clients: one pending frame per client, newest wins.
 
-The engine thread calls ``StreamHub.publish`` after each step; each client's sender task takes
-frames from its ``FrameSlot``. A slow client therefore never makes the server queue frames: a new
-frame replaces the one it has not taken yet, and the replaced frame is counted as dropped.
+The engine thread calls ``StreamHub.publish`` after each step. It builds and msgpack-encodes
+each frame once per distinct subscription (not once per client), so the event loop only copies
+bytes to sockets. Each client's sender task takes frames from its ``FrameSlot``: a slow client
+never makes the server queue frames, because a new frame replaces the one it has not taken yet,
+and the replaced frame is counted as dropped.
 """
 
 from __future__ import annotations
 
 import asyncio
 import math
+import struct
 import threading
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
 
-from diathermy.service.encoding import encode_array, sample_nodal
+from diathermy.service.encoding import encode_array, pack, sample_nodal
 
 Region = Literal["volume", "surface"]
 
@@ -49,12 +52,30 @@ class Subscription:
     region: Region = "volume"
 
 
-@dataclass
-class Frame:
-    """One step's message minus the per-client counters, which are added when it is sent."""
+def _map_header(n: int) -> bytes:
+    """msgpack header of a map with ``n`` entries."""
+    return bytes([0x80 | n]) if n < 16 else b"\xde" + struct.pack(">H", n)
 
-    header: dict[str, Any]
-    payload: dict[str, Any]
+
+@dataclass(frozen=True)
+class Frame:
+    """One step's message, encoded once: ``n`` msgpack key-value pairs in ``body``.
+
+    The per-client counter ``dropped`` is prepended when the frame is sent (``to_bytes``).
+    """
+
+    step: int
+    n: int
+    body: bytes
+
+    @classmethod
+    def encode(cls, message: dict[str, Any]) -> Frame:
+        body = b"".join(pack(k) + pack(v) for k, v in message.items())
+        return cls(step=int(message["step"]), n=len(message), body=body)
+
+    def to_bytes(self, dropped: int) -> bytes:
+        """The whole msgpack map: the shared pairs plus this client's ``dropped``."""
+        return _map_header(self.n + 1) + pack("dropped") + pack(dropped) + self.body
 
 
 class FrameSlot:
@@ -148,34 +169,36 @@ class StreamHub:
         with self._lock:
             return len(self._subscribers)
 
-    def publish(
-        self,
-        sim: Any,
-        *,
-        session_id: str,
-        control_id: int,
-        only: Subscriber | None = None,
-    ) -> int:
-        """Offer the current state to subscribers due this step (or to ``only``); returns drops."""
+    def publish(self, sim: Any, *, session_id: str, control_id: int) -> int:
+        """Offer the current state to the subscribers due this step; returns the drops."""
         with self._lock:
-            targets = [only] if only is not None else list(self._subscribers)
+            targets = [s for s in self._subscribers if sim.step_index % s.subscription.every == 0]
         if not targets:
             return 0
-        header = {
-            "type": "frame",
-            "session": session_id,
-            "step": int(sim.step_index),
-            "time_s": float(sim.time_s),
-            "control_id": control_id,
-            "report": report_dict(sim),
-        }
-        cache: dict[Subscription, dict[str, Any]] = {}
+        header = frame_header(sim, session_id=session_id, control_id=control_id)
+        cache: dict[Subscription, Frame] = {}
         drops = 0
         for s in targets:
             sub = s.subscription
-            if only is None and sim.step_index % sub.every:
-                continue
             if sub not in cache:
-                cache[sub] = build_payload(sim, sub)
-            drops += s.slot.put(Frame(header=header, payload=cache[sub]))
+                cache[sub] = Frame.encode({**header, **build_payload(sim, sub)})
+            drops += s.slot.put(cache[sub])
         return drops
+
+
+def frame_header(sim: Any, *, session_id: str, control_id: int) -> dict[str, Any]:
+    """What every frame of this step carries besides its arrays."""
+    return {
+        "type": "frame",
+        "session": session_id,
+        "step": int(sim.step_index),
+        "time_s": float(sim.time_s),
+        "control_id": control_id,
+        "report": report_dict(sim),
+    }
+
+
+def current_frame(sim: Any, sub: Subscription, *, session_id: str, control_id: int) -> Frame:
+    """The current state as one client's frame (sent after it subscribes)."""
+    header = frame_header(sim, session_id=session_id, control_id=control_id)
+    return Frame.encode({**header, **build_payload(sim, sub)})

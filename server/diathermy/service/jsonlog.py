@@ -18,7 +18,7 @@ class JsonFormatter(logging.Formatter):
             + f".{int(record.msecs):03d}Z",
             "level": record.levelname,
             "logger": record.name,
-            "message": record.getMessage(),
+            "message": record.getMessage().rstrip("\n"),
         }
         for key, value in vars(record).items():
             if key not in _STANDARD and not key.startswith("_"):
@@ -29,10 +29,11 @@ class JsonFormatter(logging.Formatter):
 
 
 def configure_logging(level: str = "INFO") -> None:
-    """Send diathermy's and uvicorn's logs to stderr as JSON lines."""
+    """Send diathermy's and uvicorn's logs, and Python warnings, to stderr as JSON lines."""
     handler = logging.StreamHandler()
     handler.setFormatter(JsonFormatter())
-    for name in ("diathermy", "uvicorn", "uvicorn.error"):
+    logging.captureWarnings(True)  # numpy RuntimeWarnings become 'py.warnings' records
+    for name in ("diathermy", "uvicorn", "uvicorn.error", "py.warnings"):
         logger = logging.getLogger(name)
         logger.handlers[:] = [handler]
         logger.setLevel(level.upper())

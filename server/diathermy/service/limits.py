@@ -1,12 +1,34 @@
-"""Limits checked before any allocation: grid size and its estimated memory, steps, sessions."""
+"""Limits checked before any allocation: grid size and its estimated memory, steps, sessions,
+and the physical range of an electrode's drive."""
 
 from __future__ import annotations
 
 from collections.abc import Iterable
 
 from diathermy.engine.limits import estimate_memory_bytes
+from diathermy.scene import Scene
 from diathermy.service.config import Settings
 from diathermy.service.exceptions import LimitExceededError, TooManySessionsError
+
+MAX_POWER_W = 1000.0
+"""Highest electrode power accepted, W: electrosurgical generators deliver up to ~400 W."""
+
+MAX_CURRENT_DENSITY_A_PER_M2 = 1.0e7
+"""Highest electrode current density accepted, A/m^2 (the default scene drives 5.72e4)."""
+
+
+def check_drive(scene: Scene) -> None:
+    """Reject a scene whose electrodes are driven beyond the physical range (422 naming it)."""
+    for i, el in enumerate(scene.electrodes):
+        for name, value, top in (
+            ("power_w", el.power_w, MAX_POWER_W),
+            ("current_density_a_per_m2", el.current_density_a_per_m2, MAX_CURRENT_DENSITY_A_PER_M2),
+        ):
+            if value > top:
+                raise LimitExceededError(
+                    f"{name} {value:g} is over the limit of {top:g}",
+                    field=f"scene.electrodes.{i}.{name}",
+                )
 
 
 def check_grid(settings: Settings, grid_shape: tuple[int, int, int], effects: Iterable[str]) -> int:

@@ -41,7 +41,7 @@ async def _autosave(state: AppState) -> None:
     while True:
         await asyncio.sleep(state.settings.autosave_interval_s)
         try:
-            await save_dirty(registry=state.registry, wait=False)
+            await save_dirty(registry=state.registry)
         except Exception:
             log.exception("autosave failed")
 
@@ -52,15 +52,23 @@ def create_app(settings: Settings | None = None, *, engine: EngineAdapter | None
     state = AppState(
         settings=settings,
         tokens=TokenStore.from_settings(settings),
-        registry=SessionRegistry(settings.data_dir, engine or DefaultEngine(settings.data_dir)),
+        registry=SessionRegistry(
+            settings.data_dir,
+            engine or DefaultEngine(settings.data_dir),
+            fsync=settings.journal_fsync,
+        ),
         metrics=ServiceMetrics(),
+    )
+    sessions_ = state.registry.sessions
+    state.metrics.sessions.set_function(lambda: len(sessions_))
+    state.metrics.sessions_loaded.set_function(
+        lambda: sum(r.sim is not None for r in list(sessions_.values()))
     )
 
     @contextlib.asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
         state.tokens.warn_if_disabled()
         n = await anyio.to_thread.run_sync(state.registry.scan)
-        state.metrics.sessions.set(n)
         state.ready = True
         log.info("ready", extra={"sessions": n, "data_dir": str(settings.data_dir)})
         saver = asyncio.create_task(_autosave(state))
@@ -72,7 +80,7 @@ def create_app(settings: Settings | None = None, *, engine: EngineAdapter | None
             for rec in list(state.registry.sessions.values()):
                 if rec.driver is not None:
                     await rec.driver.stop()
-            saved = await save_dirty(registry=state.registry, wait=True)
+            saved = await save_dirty(registry=state.registry)
             log.info("stopped", extra={"saved_sessions": saved})
 
     app = FastAPI(

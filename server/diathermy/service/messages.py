@@ -10,13 +10,16 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
 
+from diathermy.service.limits import MAX_CURRENT_DENSITY_A_PER_M2, MAX_POWER_W
+
 
 class _Msg(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
 
 class Subscribe(_Msg):
-    """Choose what frames carry; replaces the previous subscription."""
+    """Choose what frames carry; replaces the previous subscription. Answered by an ``ack``,
+    then a frame of the current state (in that order)."""
 
     type: Literal["subscribe"]
     fields: list[str] = Field(default_factory=list, max_length=16)
@@ -32,9 +35,13 @@ class ElectrodeControl(_Msg):
 
     type: Literal["electrode"]
     name: str = "active"
-    position_m: tuple[float, float] | None = None
-    power_w: float | None = Field(None, ge=0, allow_inf_nan=False)
-    current_density_a_per_m2: float | None = Field(None, ge=0, allow_inf_nan=False)
+    position_m: tuple[float, float] | None = Field(
+        None, description="(x, y) on the top surface, m, within the block"
+    )
+    power_w: float | None = Field(None, ge=0, le=MAX_POWER_W, allow_inf_nan=False)
+    current_density_a_per_m2: float | None = Field(
+        None, ge=0, le=MAX_CURRENT_DENSITY_A_PER_M2, allow_inf_nan=False
+    )
     active: bool | None = None
     tag: str | int | None = Field(None, description="echoed in the ack")
 
@@ -53,10 +60,11 @@ class Pause(_Msg):
 
 
 class Step(_Msg):
-    """Take ``n`` steps now (also while paused)."""
+    """Take ``n`` steps now (also while paused); steps queued at once are bounded by the server's
+    ``MAX_STEPS_PER_REQUEST`` (200 by default), the same limit as a REST step request."""
 
     type: Literal["step"]
-    n: int = Field(1, ge=1, le=1000)
+    n: int = Field(1, ge=1, description="at most MAX_STEPS_PER_REQUEST queued at once")
 
 
 ClientMessage = Annotated[
@@ -86,6 +94,10 @@ class Hello(BaseModel):
 class Ack(BaseModel):
     type: Literal["ack"]
     of: str = Field(description="the acknowledged message type")
+    step: int | None = Field(
+        description="the session's step when the message was applied (an electrode change "
+        "takes effect from step + 1)"
+    )
     control_id: int = Field(description="frames with control_id >= this reflect the message")
     tag: str | int | None = None
     running: bool
@@ -128,7 +140,18 @@ def stream_messages_schema() -> dict[str, Any]:
         "$id": "https://diathermy.dev/schema/stream-messages-v1.json",
         "title": "diathermy stream messages (v1)",
         "description": "Messages of /v1/sessions/{id}/stream. Client messages are JSON text or "
-        "msgpack binary; server messages are msgpack binary ('bytes' values are msgpack bin).",
+        "msgpack binary; server messages are msgpack binary ('bytes' values are msgpack bin). "
+        "Every close the server makes is preceded by an 'error' message and has the same error "
+        "as a JSON close reason, except 1009, which the WebSocket layer sends with a plain-text "
+        "reason (see x-close-codes).",
+        "x-close-codes": {
+            "1008": "too_many_messages: over 64 replies unread (control messages flood)",
+            "1009": "a message over MAX_MESSAGE_BYTES (plain-text reason, no error message)",
+            "1011": "the session could not be loaded, e.g. checkpoint_error",
+            "4400": "bad_message: not JSON/msgpack, unknown type, invalid or out-of-range value",
+            "4401": "unauthorized: missing or unknown token",
+            "4404": "not_found: no such session for this token, or it was deleted",
+        },
         "client_to_server": TypeAdapter(ClientMessage).json_schema(),
         "server_to_client": TypeAdapter(ServerMessage).json_schema(),
     }

@@ -19,6 +19,20 @@ class _TooLarge(Exception):
     pass
 
 
+def _replay(body: bytes, receive: Receive) -> Receive:
+    """A receive that hands the app the already-read body, then defers to the server."""
+    sent = False
+
+    async def replay() -> Message:
+        nonlocal sent
+        if not sent:
+            sent = True
+            return {"type": "http.request", "body": body, "more_body": False}
+        return await receive()
+
+    return replay
+
+
 class LimitAndLogMiddleware:
     """Reject bodies over ``max_bytes`` with 413 JSON; log and count every HTTP request."""
 
@@ -52,6 +66,14 @@ class LimitAndLogMiddleware:
             await self._reject(send)
             self._record(scope, 413, t0)
             return
+        if length is None and scope["method"] not in ("GET", "HEAD", "OPTIONS", "DELETE"):
+            # a chunked body has no length to check up front: read it (bounded), then replay it
+            body, too_large = await self._read_bounded(receive)
+            if too_large:
+                await self._reject(send)
+                self._record(scope, 413, t0)
+                return
+            receive = _replay(body, receive)
         seen = 0
 
         async def limited_receive() -> Message:
@@ -76,6 +98,22 @@ class LimitAndLogMiddleware:
                 await self._reject(send)
             status["code"] = 413
         self._record(scope, int(status["code"]), t0)
+
+    async def _read_bounded(self, receive: Receive) -> tuple[bytes, bool]:
+        """The whole request body, or (what was read, True) as soon as it passes the limit."""
+        chunks: list[bytes] = []
+        size = 0
+        while True:
+            msg = await receive()
+            if msg["type"] != "http.request":
+                return b"".join(chunks), False
+            chunk = msg.get("body", b"")
+            size += len(chunk)
+            if size > self.max_bytes:
+                return b"", True
+            chunks.append(chunk)
+            if not msg.get("more_body", False):
+                return b"".join(chunks), False
 
     def _record(self, scope: Scope, status: int, t0: float) -> None:
         route: Any = scope.get("route")

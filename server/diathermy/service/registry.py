@@ -4,7 +4,11 @@ Layout of the data directory::
 
     sessions/<id>/meta.json          owner (token sha256), scene name, grid, step, time, snapshots
     sessions/<id>/state.h5           the latest checkpoint (restored after a restart)
-    sessions/<id>/snapshots/<s>.h5   named snapshots a client asked for
+    sessions/<id>/journal.jsonl      the commands since that checkpoint (``journal.py``)
+    sessions/<id>/snapshots/<s>.h5   snapshots a client asked for (ids chosen by the server)
+
+The checkpoint plus the journal is the session: ``meta.json``'s step and time are those of the
+checkpoint, and a scan after a restart reads the journal to list the step a load will reach.
 """
 
 from __future__ import annotations
@@ -14,8 +18,11 @@ import json
 import logging
 import os
 import shutil
+import threading
 import time
 import uuid
+from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,6 +31,7 @@ from diathermy.errors import CheckpointError
 from diathermy.service.engine import EngineAdapter
 from diathermy.service.exceptions import SessionNotFoundError
 from diathermy.service.hub import StreamHub
+from diathermy.service.journal import Journal, checkpoint_seq, last_step, mark_checkpoint, replay
 
 log = logging.getLogger("diathermy.service.registry")
 
@@ -53,6 +61,11 @@ def sim_meta(sim: Any) -> dict[str, Any]:
     }
 
 
+def public_meta(rec: SessionRecord) -> dict[str, Any]:
+    """The metadata with the live simulation's step and time; never writes into ``rec.meta``."""
+    return {**rec.meta, **sim_meta(rec.sim)} if rec.sim is not None else dict(rec.meta)
+
+
 @dataclass(eq=False)
 class SessionRecord:
     """One session: its owner, metadata, the simulation once loaded, and what guards it."""
@@ -67,6 +80,14 @@ class SessionRecord:
     control_id: int = 0
     dirty: bool = False
     driver: Any = None  # the stream driver (stream.SessionDriver) while clients are connected
+    journal: Journal | None = None
+    deleted: bool = False
+    waiting: int = 0  # tasks waiting for the lock: a stepping batch yields to them
+    exclusive: bool = False  # a REST step or restore is queued or running (a second gets 409)
+    batch_active: bool = False  # a stream's stepping batch holds the lock (driver.py)
+    controls: deque[tuple[Callable[[Any], Any], asyncio.Future[Any]]] = field(default_factory=deque)
+    batch_lock: threading.Lock = field(default_factory=threading.Lock)
+    interrupt: threading.Event = field(default_factory=threading.Event)
 
     @property
     def state_path(self) -> Path:
@@ -79,10 +100,20 @@ class SessionRecord:
     def snapshot_path(self, snapshot_id: str) -> Path:
         return self.directory / "snapshots" / f"{snapshot_id}.h5"
 
-    def refresh_meta(self) -> None:
-        """Copy the simulation's step, time and shape into the metadata."""
-        if self.sim is not None:
-            self.meta.update(sim_meta(self.sim))
+    @property
+    def journal_path(self) -> Path:
+        return self.directory / "journal.jsonl"
+
+    def offer(self, fn: Callable[[Any], Any]) -> asyncio.Future[Any] | None:
+        """Hand ``fn(sim)`` to the running stepping batch, which applies it before its next
+        step (no lock hand-over); None when no batch runs (then take the lock instead)."""
+        with self.batch_lock:
+            if not self.batch_active:
+                return None
+            fut = asyncio.get_running_loop().create_future()
+            self.controls.append((fn, fut))
+        self.interrupt.set()
+        return fut
 
     def write_meta(self) -> None:
         _write_json_atomic(self.meta_path, self.meta)
@@ -91,9 +122,10 @@ class SessionRecord:
 class SessionRegistry:
     """All sessions, keyed by id; lookups are by (owner, id) so other owners see nothing."""
 
-    def __init__(self, data_dir: Path, engine: EngineAdapter) -> None:
+    def __init__(self, data_dir: Path, engine: EngineAdapter, *, fsync: bool = False) -> None:
         self.root = Path(data_dir) / "sessions"
         self.engine = engine
+        self.fsync = fsync
         self.sessions: dict[str, SessionRecord] = {}
 
     def scan(self) -> int:
@@ -109,9 +141,15 @@ class SessionRegistry:
             if not (meta_path.parent / "state.h5").exists():
                 log.error("skipping session %s: it has no checkpoint", sid)
                 continue
-            self.sessions[sid] = SessionRecord(
-                id=sid, owner=owner, directory=meta_path.parent, meta=meta
-            )
+            rec = SessionRecord(id=sid, owner=owner, directory=meta_path.parent, meta=meta)
+            try:
+                seq, step, time_s = checkpoint_seq(rec.state_path)
+                recent = last_step(Journal(rec.journal_path).entries(after=seq))
+            except CheckpointError as err:  # listed all the same; loading it answers 409
+                log.error("session %s: %s", sid, err)
+            else:
+                meta["step"], meta["time_s"] = recent or (step, time_s)
+            self.sessions[sid] = rec
         return len(self.sessions)
 
     def owned(self, owner: str) -> list[SessionRecord]:
@@ -135,24 +173,62 @@ class SessionRegistry:
         return rec
 
     def load(self, rec: SessionRecord) -> Any:
-        """The session's simulation, read from its checkpoint if not yet in memory (engine thread)."""
+        """The session's simulation: its checkpoint plus the journal replayed (engine thread)."""
+        if rec.deleted:
+            raise SessionNotFoundError(f"session {rec.id} was deleted", field="session_id")
         if rec.sim is None:
             t0 = time.perf_counter()
-            rec.sim = self.engine.load(rec.state_path)
+            seq, _, _ = checkpoint_seq(rec.state_path)
+            sim = self.engine.load(rec.state_path)
+            journal = Journal(rec.journal_path, seq=seq, fsync=self.fsync)
+            entries = journal.entries(after=seq)
+            if journal.torn:  # rewrite without the cut-short line before appending after it
+                journal.compact(seq)
+            steps = replay(sim, entries)
+            journal.seq = max([seq, *(int(e["seq"]) for e in entries)])
+            rec.sim, rec.journal = sim, journal
+            rec.dirty = bool(entries)  # the next autosave folds the journal into a checkpoint
             log.info(
                 "restored session",
-                extra={"session": rec.id, "seconds": round(time.perf_counter() - t0, 3)},
+                extra={
+                    "session": rec.id,
+                    "journal_entries": len(entries),
+                    "replayed_steps": steps,
+                    "seconds": round(time.perf_counter() - t0, 3),
+                },
             )
         return rec.sim
 
+    def log_step(self, rec: SessionRecord) -> None:
+        """Journal the step just taken, before anything acknowledges it (engine thread)."""
+        assert rec.journal is not None
+        rec.journal.append("step", step=int(rec.sim.step_index), time_s=float(rec.sim.time_s))
+        rec.dirty = True
+
+    def log_electrode(self, rec: SessionRecord, name: str, update: dict[str, Any]) -> None:
+        """Journal an electrode change just applied, before it is acknowledged (engine thread)."""
+        assert rec.journal is not None
+        rec.journal.append("electrode", name=name, update=update)
+        rec.dirty = True
+
     def save(self, rec: SessionRecord) -> None:
-        """Checkpoint the session and its metadata (engine thread, under the session lock)."""
-        rec.refresh_meta()
+        """Checkpoint the session, then empty its journal (engine thread, under the session lock).
+
+        Order matters for a crash at any point: the checkpoint (marked with the journal's
+        sequence number) replaces the old one atomically, then the metadata, then the journal is
+        compacted; entries the new checkpoint already holds are skipped by their number.
+        """
+        if rec.journal is None:
+            rec.journal = Journal(rec.journal_path, fsync=self.fsync)
+        seq = rec.journal.seq
         tmp = rec.state_path.with_suffix(".h5.tmp")
         rec.sim.save_checkpoint(tmp)
+        mark_checkpoint(tmp, seq)
         os.replace(tmp, rec.state_path)
+        rec.meta.update(sim_meta(rec.sim))
         rec.meta["saved_at"] = time.time()
         rec.write_meta()
+        rec.journal.compact(seq)
         rec.dirty = False
 
     def snapshot(self, rec: SessionRecord) -> dict[str, Any]:
@@ -182,5 +258,6 @@ class SessionRegistry:
 
     def remove(self, rec: SessionRecord) -> None:
         """Forget a session and delete its files."""
+        rec.deleted = True
         self.sessions.pop(rec.id, None)
         shutil.rmtree(rec.directory, ignore_errors=True)

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from diathermy.scene import Scene
+from diathermy.service.limits import MAX_CURRENT_DENSITY_A_PER_M2, MAX_POWER_W
 
 
 class _In(BaseModel):
@@ -18,7 +19,10 @@ class SessionCreate(_In):
 
     model_config = ConfigDict(
         extra="forbid",
-        json_schema_extra={"examples": [{"builtin": "default", "grid": [5, 5, 9]}]},
+        json_schema_extra={
+            "examples": [{"builtin": "default", "grid": [5, 5, 9]}],
+            "oneOf": [{"required": ["scene"]}, {"required": ["builtin"]}],
+        },
     )
 
     scene: Scene | None = Field(None, description="an inline scene")
@@ -72,7 +76,12 @@ class SessionList(BaseModel):
 class StepRequest(_In):
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"n": 2}]})
 
-    n: int = Field(1, ge=1, description="steps to take (bounded by the server's limit)")
+    n: int = Field(
+        1,
+        ge=1,
+        description="steps to take; at most the server's MAX_STEPS_PER_REQUEST (200 by default), "
+        "else 422 limit_exceeded",
+    )
 
 
 class StepResult(BaseModel):
@@ -84,9 +93,19 @@ class StepResult(BaseModel):
 class ElectrodeUpdate(_In):
     """Run-time changes to one electrode, applied before the next step; omitted means unchanged."""
 
-    position_m: tuple[float, float] | None = Field(None, description="(x, y) on the top surface")
-    power_w: float | None = Field(None, ge=0, allow_inf_nan=False)
-    current_density_a_per_m2: float | None = Field(None, ge=0, allow_inf_nan=False)
+    position_m: tuple[float, float] | None = Field(
+        None, description="(x, y) on the top surface, m, within the block"
+    )
+    power_w: float | None = Field(
+        None, ge=0, le=MAX_POWER_W, allow_inf_nan=False, description="W; switches to power drive"
+    )
+    current_density_a_per_m2: float | None = Field(
+        None,
+        ge=0,
+        le=MAX_CURRENT_DENSITY_A_PER_M2,
+        allow_inf_nan=False,
+        description="A/m^2; switches to current-density drive",
+    )
     active: bool | None = None
 
 
@@ -95,13 +114,21 @@ class ElectrodeAck(BaseModel):
     control_id: int = Field(description="stream frames with control_id >= this reflect the change")
 
 
+Triple = Annotated[list[float], Field(min_length=3, max_length=3)]
+IndexTriple = Annotated[list[int], Field(min_length=3, max_length=3)]
+
+
 class SurfacePublic(BaseModel):
-    """The cut surface as a triangle mesh (empty when nothing is cut)."""
+    """The cut surface as a triangle mesh (empty when nothing is cut).
+
+    In msgpack (``format=msgpack``) ``vertices_m`` and ``faces`` are wire arrays
+    ``{shape, dtype, data}`` ((n, 3) float64 and (m, 3) int32), named as here.
+    """
 
     step: int
     time_s: float
-    vertices_m: list[tuple[float, float, float]]
-    faces: list[tuple[int, int, int]]
+    vertices_m: list[Triple] = Field(description="(n, 3) vertex positions, m")
+    faces: list[IndexTriple] = Field(description="(m, 3) vertex indices of the triangles")
 
 
 class ErrorPublic(BaseModel):

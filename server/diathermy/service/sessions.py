@@ -7,9 +7,10 @@ event loop or other sessions. A step or restore on a session that is busy raises
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import tempfile
-from collections.abc import Callable
+from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -21,13 +22,14 @@ from diathermy.scene import builtin_scene, scene_from_dict
 from diathermy.service.config import Settings
 from diathermy.service.exceptions import (
     BadRequestError,
+    NotFoundError,
     SessionBusyError,
     SessionNotFoundError,
 )
 from diathermy.service.hub import report_dict
-from diathermy.service.limits import check_grid, check_session_count, check_steps
+from diathermy.service.limits import check_drive, check_grid, check_session_count, check_steps
 from diathermy.service.metrics import ServiceMetrics
-from diathermy.service.registry import SessionRecord, SessionRegistry
+from diathermy.service.registry import SessionRecord, SessionRegistry, public_meta
 from diathermy.service.schemas import (
     ElectrodeUpdate,
     GridPublic,
@@ -47,13 +49,41 @@ async def run_locked(
     *,
     wait: bool = True,
 ) -> T:
-    """Run ``fn(sim)`` in a worker thread under the session lock (loading the session first)."""
-    if not wait and rec.lock.locked():
-        raise SessionBusyError(
-            f"session {rec.id} is busy with another step or restore; retry when it is done"
-        )
-    async with rec.lock:
-        return await anyio.to_thread.run_sync(lambda: fn(registry.load(rec)))
+    """Run ``fn(sim)`` in a worker thread under the session lock (loading the session first).
+
+    ``wait=False`` marks a step or restore: a second one while the first is queued or running
+    is refused with ``SessionBusyError`` (409); autosaves, reads and stream steps only delay it.
+    """
+    if rec.deleted:
+        raise SessionNotFoundError(f"session {rec.id} was deleted", field="session_id")
+    if not wait:
+        if rec.exclusive:
+            raise SessionBusyError(
+                f"session {rec.id} is busy with another step or restore; retry when it is done"
+            )
+        rec.exclusive = True
+    try:
+        async with session_lock(rec):
+            return await anyio.to_thread.run_sync(lambda: fn(registry.load(rec)))
+    finally:
+        if not wait:
+            rec.exclusive = False
+
+
+@contextlib.asynccontextmanager
+async def session_lock(rec: SessionRecord) -> AsyncIterator[None]:
+    """Hold the session lock; a stream's stepping batch yields it after the step in progress."""
+    rec.waiting += 1
+    rec.interrupt.set()
+    counted = True
+    try:
+        async with rec.lock:
+            rec.waiting -= 1
+            counted = False
+            yield
+    finally:
+        if counted:
+            rec.waiting -= 1
 
 
 async def create_session(
@@ -79,22 +109,20 @@ async def create_session(
         data["grid"] = body.grid
         scene = scene_from_dict(data)
     check_grid(settings, scene.grid, scene.closed_effects)
+    check_drive(scene)
 
     def build() -> SessionRecord:
         sim = registry.engine.create(scene)
         return registry.add(owner=owner, sim=sim)
 
     rec = await anyio.to_thread.run_sync(build)
-    metrics.sessions.set(len(registry.sessions))
-    metrics.sessions_loaded.set(sum(r.sim is not None for r in registry.sessions.values()))
     log.info("created session", extra={"session": rec.id, "scene": scene.name})
     return rec
 
 
 def session_public(rec: SessionRecord) -> SessionPublic:
     """The public view of a session, from its metadata (and the live simulation if loaded)."""
-    rec.refresh_meta()
-    m = rec.meta
+    m = public_meta(rec)
     return SessionPublic(
         id=rec.id,
         scene_name=m["scene_name"],
@@ -110,12 +138,14 @@ def session_public(rec: SessionRecord) -> SessionPublic:
     )
 
 
-def advance(rec: SessionRecord, sim: Any, n: int, metrics: ServiceMetrics) -> list[Any]:
-    """Take ``n`` steps, publishing each to stream subscribers (engine thread, under the lock)."""
+def advance(
+    rec: SessionRecord, registry: SessionRegistry, sim: Any, n: int, metrics: ServiceMetrics
+) -> list[Any]:
+    """Take ``n`` steps, journalling then publishing each (engine thread, under the lock)."""
     reports = []
     for _ in range(n):
         rep = sim.step()
-        rec.dirty = True
+        registry.log_step(rec)
         metrics.observe_report(rep)
         drops = rec.hub.publish(sim, session_id=rec.id, control_id=rec.control_id)
         if drops:
@@ -134,23 +164,34 @@ async def step_session(
 ) -> list[Any]:
     """Step a session ``n`` times; returns the step reports."""
     check_steps(settings, n)
-    return await run_locked(rec, registry, lambda sim: advance(rec, sim, n, metrics), wait=False)
+    return await run_locked(
+        rec, registry, lambda sim: advance(rec, registry, sim, n, metrics), wait=False
+    )
 
 
 async def update_electrode(
     *, registry: SessionRegistry, rec: SessionRecord, name: str, update: ElectrodeUpdate
-) -> int:
-    """Apply electrode changes before the next step; returns the new control id."""
+) -> tuple[int, int]:
+    """Apply electrode changes before the next step; returns (new control id, step applied at)."""
 
-    def apply(sim: Any) -> int:
+    def apply(sim: Any) -> tuple[int, int]:
         names = [e.name for e in sim.scene.electrodes]
         if name not in names:
-            raise SceneError(f"name: unknown electrode {name!r}; electrodes: {', '.join(names)}")
-        sim.set_electrode(name, **update.model_dump(exclude_none=True))
+            raise NotFoundError(
+                f"unknown electrode {name!r}; electrodes: {', '.join(names)}", field="name"
+            )
+        changes = update.model_dump(exclude_none=True)
+        sim.set_electrode(name, **changes)
+        registry.log_electrode(rec, name, changes)
         rec.control_id += 1
-        rec.dirty = True
-        return rec.control_id
+        return rec.control_id, int(sim.step_index)
 
+    if rec.deleted:
+        raise SessionNotFoundError(f"session {rec.id} was deleted", field="session_id")
+    offered = rec.offer(apply)  # a stream is stepping: applied between two of its steps
+    if offered is not None:
+        result: tuple[int, int] = await offered
+        return result
     return await run_locked(rec, registry, apply)
 
 
@@ -231,25 +272,24 @@ async def restore_snapshot(
     return rec
 
 
-async def delete_session(
-    *, registry: SessionRegistry, metrics: ServiceMetrics, rec: SessionRecord
-) -> None:
-    """Stop the session's stream driver and remove it from memory and disk."""
-    if rec.driver is not None:
-        await rec.driver.stop()
-    async with rec.lock:
+async def delete_session(*, registry: SessionRegistry, rec: SessionRecord) -> None:
+    """Remove a session from memory and disk; its stream clients get an error and a close."""
+    rec.deleted = True  # refuses new work and ends a stepping batch
+    async with session_lock(rec):
         await anyio.to_thread.run_sync(lambda: registry.remove(rec))
-    metrics.sessions.set(len(registry.sessions))
+    if rec.driver is not None:
+        await rec.driver.close_all(4404, "not_found", f"session {rec.id} was deleted", "session_id")
 
 
-async def save_dirty(*, registry: SessionRegistry, wait: bool) -> int:
-    """Checkpoint every loaded session that changed; skips busy ones unless ``wait``."""
+async def save_dirty(*, registry: SessionRegistry) -> int:
+    """Checkpoint every loaded session that changed, compacting its journal (also while it is
+    streamed: the stepping batch yields the lock after the step in progress)."""
     saved = 0
     for rec in list(registry.sessions.values()):
-        if rec.sim is None or not rec.dirty or (not wait and rec.lock.locked()):
+        if rec.sim is None or not rec.dirty:
             continue
-        async with rec.lock:
-            if rec.id in registry.sessions:
+        async with session_lock(rec):
+            if rec.id in registry.sessions and not rec.deleted:
                 await anyio.to_thread.run_sync(registry.save, rec)
                 saved += 1
     return saved

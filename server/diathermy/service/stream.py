@@ -1,10 +1,8 @@
-"""The WebSocket stream of a session: subscriptions, control messages, and the stepping driver.
+"""The WebSocket stream of a session: subscriptions and control messages (``driver.py`` steps).
 
-One ``SessionDriver`` per session steps it while any client asked it to run (at the requested
-rate, capped by the server) and takes single steps on request; every step is published to all
-subscribers through their one-frame slots. Protocol errors close the socket with code 4400 and a
-JSON reason; a rejected value (an unknown electrode, a position off the block) only answers with
-an ``error`` message.
+Every step is published to all subscribers through their one-frame slots. Protocol errors close
+the socket with code 4400 and a JSON reason, after an ``error`` message; a rejected value (an
+unknown electrode, a position off the block) only answers with an ``error`` message.
 """
 
 from __future__ import annotations
@@ -15,7 +13,7 @@ import json
 import logging
 import time
 from collections import deque
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Mapping
 from typing import Any
 
 from pydantic import ValidationError
@@ -23,10 +21,11 @@ from starlette.websockets import WebSocket, WebSocketDisconnect, WebSocketState
 
 from diathermy.errors import DiathermyError
 from diathermy.scene.io import describe_validation_error
+from diathermy.service.driver import SessionDriver, driver_of
 from diathermy.service.encoding import pack, unpack
 from diathermy.service.errors import classify
 from diathermy.service.exceptions import BadRequestError
-from diathermy.service.hub import FrameSlot, Subscriber, Subscription
+from diathermy.service.hub import Frame, FrameSlot, Subscriber, Subscription, current_frame
 from diathermy.service.messages import (
     ElectrodeControl,
     Pause,
@@ -37,7 +36,7 @@ from diathermy.service.messages import (
 )
 from diathermy.service.registry import SessionRecord
 from diathermy.service.schemas import ElectrodeUpdate
-from diathermy.service.sessions import advance, run_locked, update_electrode
+from diathermy.service.sessions import run_locked, update_electrode
 from diathermy.service.state import AppState
 
 log = logging.getLogger("diathermy.service.stream")
@@ -46,101 +45,13 @@ CLOSE_BAD_MESSAGE = 4400
 CLOSE_UNAUTHORIZED = 4401
 CLOSE_NOT_FOUND = 4404
 CLOSE_TOO_BIG = 1009
+CLOSE_POLICY = 1008
+CLOSE_SERVER_ERROR = 1011
 MAX_PENDING_REPLIES = 64
 
-Notify = Callable[[dict[str, Any]], Awaitable[None]]
 
-
-class SessionDriver:
-    """Steps one session for its stream clients: continuously at a rate, or n steps on demand."""
-
-    def __init__(self, rec: SessionRecord, state: AppState) -> None:
-        self.rec = rec
-        self.state = state
-        self.running = False
-        self.rate_hz = 10.0
-        self.pending = 0
-        self.clients: dict[Subscriber, Notify] = {}
-        self._wake = asyncio.Event()
-        self._task: asyncio.Task[None] | None = None
-
-    def attach(self, sub: Subscriber, notify: Notify) -> None:
-        self.clients[sub] = notify
-        self.rec.hub.add(sub)
-        if self._task is None:
-            self._task = asyncio.create_task(self._loop(), name=f"driver-{self.rec.id}")
-
-    async def detach(self, sub: Subscriber) -> None:
-        self.clients.pop(sub, None)
-        self.rec.hub.remove(sub)
-        if not self.clients:
-            await self.stop()
-
-    async def stop(self) -> None:
-        """Stop stepping and end the task (the last client left, or the session is deleted)."""
-        self.running = False
-        self.pending = 0
-        if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
-            self._task = None
-        if self.rec.driver is self:
-            self.rec.driver = None
-
-    def run(self, rate_hz: float) -> None:
-        self.rate_hz = min(rate_hz, self.state.settings.max_stream_rate_hz)
-        self.running = True
-        self._wake.set()
-
-    def pause(self) -> None:
-        self.running = False
-
-    def step(self, n: int) -> None:
-        self.pending += n
-        self._wake.set()
-
-    async def _broadcast(self, msg: dict[str, Any]) -> None:
-        for notify in list(self.clients.values()):
-            with contextlib.suppress(Exception):
-                await notify(msg)
-
-    async def _loop(self) -> None:
-        next_t = time.monotonic()
-        while True:
-            if not self.running and self.pending == 0:
-                self._wake.clear()
-                await self._wake.wait()
-                next_t = time.monotonic()
-                continue
-            try:
-                await run_locked(
-                    self.rec,
-                    self.state.registry,
-                    lambda sim: advance(self.rec, sim, 1, self.state.metrics),
-                )
-            except DiathermyError as err:
-                self.running, self.pending = False, 0
-                _, code, field = classify(err)
-                await self._broadcast(
-                    {"type": "error", "error": code, "message": str(err), "field": field}
-                )
-                continue
-            if self.pending:
-                self.pending -= 1
-                await asyncio.sleep(0)
-            elif self.running:
-                next_t += 1.0 / self.rate_hz
-                delay = next_t - time.monotonic()
-                if delay < 0:
-                    next_t, delay = time.monotonic(), 0.0
-                await asyncio.sleep(delay)
-
-
-def driver_of(rec: SessionRecord, state: AppState) -> SessionDriver:
-    if rec.driver is None:
-        rec.driver = SessionDriver(rec, state)
-    return rec.driver
+class ControlFloodError(BadRequestError):
+    """The client sends control messages faster than it reads the replies."""
 
 
 def parse_message(raw: Mapping[str, Any]) -> Any:
@@ -187,7 +98,10 @@ class StreamConnection:
     async def send(self, msg: dict[str, Any]) -> None:
         """Queue a reply (hello, ack, error) for the sender; never waits on a slow socket."""
         if len(self.replies) >= MAX_PENDING_REPLIES:
-            raise BadRequestError("client sends control messages faster than it reads replies")
+            raise ControlFloodError(
+                f"over {MAX_PENDING_REPLIES} replies wait to be read: the client sends control "
+                "messages faster than it reads"
+            )
         self.replies.append(msg)
         self.sub.slot.wake()
 
@@ -198,15 +112,14 @@ class StreamConnection:
             while self.replies:
                 await self.ws.send_bytes(pack(self.replies.popleft()))
             if frame is not None:
-                msg = {**frame.header, "dropped": self.sub.slot.dropped, **frame.payload}
-                await self.ws.send_bytes(pack(msg))
+                await self.ws.send_bytes(frame.to_bytes(self.sub.slot.dropped))
                 self.state.metrics.frames_sent.inc()
 
     async def serve(self) -> None:
         driver = driver_of(self.rec, self.state)
         hello = await run_locked(self.rec, self.state.registry, self._hello)
         await self.send(hello)
-        driver.attach(self.sub, self.send)
+        driver.attach(self.sub, self)
         self.state.metrics.stream_clients.inc()
         sender = self._sender_task = asyncio.create_task(self._sender())
         try:
@@ -247,24 +160,28 @@ class StreamConnection:
                 return
             size = len(raw.get("text") or "") + len(raw.get("bytes") or b"")
             if size > limit:
-                await self._close(CLOSE_TOO_BIG, "too_large", f"message over {limit} bytes")
+                await self.close(CLOSE_TOO_BIG, "too_large", f"message over {limit} bytes")
                 return
             try:
                 msg = parse_message(raw)
             except BadRequestError as err:
-                await self._close(CLOSE_BAD_MESSAGE, "bad_message", str(err), err.field)
+                await self.close(CLOSE_BAD_MESSAGE, "bad_message", str(err), err.field)
                 return
             try:
                 await self._handle(msg, driver)
+            except ControlFloodError as err:
+                await self.close(CLOSE_POLICY, "too_many_messages", str(err))
+                return
             except DiathermyError as err:
                 _, code, field = classify(err)
                 await self.send(
                     {"type": "error", "error": code, "message": str(err), "field": field}
                 )
 
-    async def _close(self, code: int, error: str, message: str, field: str | None = None) -> None:
-        with contextlib.suppress(Exception):
-            await self.send({"type": "error", "error": error, "message": message, "field": field})
+    async def close(self, code: int, error: str, message: str, field: str | None = None) -> None:
+        """Send an ``error`` message, then close with ``code`` and the same error as reason."""
+        self.replies.append({"type": "error", "error": error, "message": message, "field": field})
+        self.sub.slot.wake()
         if self._sender_task is not None:
             await self._flush(self._sender_task)
             self._sender_task.cancel()
@@ -272,11 +189,16 @@ class StreamConnection:
             with contextlib.suppress(Exception):
                 await self.ws.close(code=code, reason=close_reason(error, message, field))
 
-    async def _ack(self, of: str, driver: SessionDriver, tag: Any = None) -> None:
+    async def _ack(
+        self, of: str, driver: SessionDriver, tag: Any = None, step: int | None = None
+    ) -> None:
+        if step is None and self.rec.sim is not None:
+            step = int(self.rec.sim.step_index)
         await self.send(
             {
                 "type": "ack",
                 "of": of,
+                "step": step,
                 "control_id": self.rec.control_id,
                 "tag": tag,
                 "running": driver.running,
@@ -286,16 +208,17 @@ class StreamConnection:
 
     async def _handle(self, msg: Any, driver: SessionDriver) -> None:
         if isinstance(msg, Subscribe):
-            await self._subscribe(msg)
+            frame = await self._subscribe(msg)
             await self._ack("subscribe", driver)
+            self.sub.slot.put(frame)  # after the ack: the sender sends replies first
         elif isinstance(msg, ElectrodeControl):
             update = ElectrodeUpdate(
                 **msg.model_dump(exclude={"type", "name", "tag"}, exclude_none=True)
             )
-            await update_electrode(
+            _, step = await update_electrode(
                 registry=self.state.registry, rec=self.rec, name=msg.name, update=update
             )
-            await self._ack("electrode", driver, msg.tag)
+            await self._ack("electrode", driver, msg.tag, step)
         elif isinstance(msg, Run):
             driver.run(msg.rate_hz)
             await self._ack("run", driver)
@@ -306,7 +229,8 @@ class StreamConnection:
             driver.step(msg.n)
             await self._ack("step", driver)
 
-    async def _subscribe(self, msg: Subscribe) -> None:
+    async def _subscribe(self, msg: Subscribe) -> Frame:
+        """Check and set the subscription; returns the current state as a frame for it."""
         sub = Subscription(
             fields=tuple(dict.fromkeys(msg.fields)),
             every=msg.every,
@@ -314,7 +238,7 @@ class StreamConnection:
             region=msg.region,
         )
 
-        def check_and_publish(sim: Any) -> None:
+        def check_and_encode(sim: Any) -> Frame:
             available = list(sim.field_names())
             for i, name in enumerate(sub.fields):
                 if name not in available:
@@ -328,11 +252,9 @@ class StreamConnection:
                         field=f"fields.{i}",
                     )
             self.sub.subscription = sub
-            self.rec.hub.publish(
-                sim, session_id=self.rec.id, control_id=self.rec.control_id, only=self.sub
-            )
+            return current_frame(sim, sub, session_id=self.rec.id, control_id=self.rec.control_id)
 
-        await run_locked(self.rec, self.state.registry, check_and_publish)
+        return await run_locked(self.rec, self.state.registry, check_and_encode)
 
 
 async def serve_stream(ws: WebSocket, state: AppState, session_id: str) -> None:
@@ -348,6 +270,9 @@ async def serve_stream(ws: WebSocket, state: AppState, session_id: str) -> None:
     except DiathermyError as err:
         status, code, field = classify(err)
         close = CLOSE_UNAUTHORIZED if status == 401 else CLOSE_NOT_FOUND
+        error = {"type": "error", "error": code, "message": str(err), "field": field}
+        with contextlib.suppress(Exception):
+            await ws.send_bytes(pack(error))
         await ws.close(code=close, reason=close_reason(code, str(err), field))
         return
     conn = StreamConnection(ws, rec, state)
@@ -357,4 +282,4 @@ async def serve_stream(ws: WebSocket, state: AppState, session_id: str) -> None:
         pass
     except DiathermyError as err:  # e.g. a checkpoint that cannot be loaded
         _, code, field = classify(err)
-        await conn._close(1011, code, str(err), field)
+        await conn.close(CLOSE_SERVER_ERROR, code, str(err), field)

@@ -15,6 +15,20 @@ from diathermy.service.schemas import FieldDtype, FieldFormat, SurfacePublic
 
 router = APIRouter(prefix="/v1/sessions", tags=["fields"], responses=ErrorResponses)
 
+FIELD_NAMES = (
+    "potential",
+    "temperature",
+    "pressure",
+    "vapor_fraction",
+    "level_set",
+    "thermal_damage",
+    "displacement",
+    "joule_heat",
+    "strain_energy",
+    "removed",
+)
+"""The fields every session has (``Simulation.field_names``); checked against it in a test."""
+
 _BINARY: dict[int | str, dict[str, Any]] = {
     200: {
         "content": {
@@ -22,7 +36,8 @@ _BINARY: dict[int | str, dict[str, Any]] = {
             "application/x-npz": {"schema": {"type": "string", "format": "binary"}},
         },
         "description": "msgpack map {step, time_s, grid, fields: {name: {shape, dtype, data}}} "
-        "or an .npz archive of the arrays plus 'step' and 'time_s'",
+        "or an .npz archive of the arrays plus 'step' and 'time_s'. Float fields come as "
+        "``dtype``; 'removed' (per tetrahedron) is always bool ('|b1'), whatever ``dtype`` says",
     }
 }
 
@@ -34,7 +49,12 @@ async def read_fields(
     rec: SessionDep,
     state: StateDep,
     fields: Annotated[
-        str, Query(max_length=1000, description="comma-separated names, e.g. temperature,level_set")
+        str,
+        Query(
+            max_length=1000,
+            description="comma-separated names of " + ", ".join(FIELD_NAMES) + " (the stream's "
+            "hello lists them too); an unknown name is a 400 naming the available ones",
+        ),
     ],
     format: Annotated[FieldFormat, Query()] = "msgpack",
     dtype: Annotated[FieldDtype, Query()] = "float32",

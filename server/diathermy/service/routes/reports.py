@@ -12,8 +12,14 @@ from pydantic import BaseModel
 from diathermy.errors import SceneError
 from diathermy.report.budget import PACKAGED_REPORT, load_report
 from diathermy.service.deps import OwnerDep, StateDep
+from diathermy.service.errors import AuthResponses
+from diathermy.service.schemas import ErrorPublic
 
-router = APIRouter(prefix="/v1/accuracy-cost", tags=["reports"])
+router = APIRouter(
+    prefix="/v1/accuracy-cost",
+    tags=["reports"],
+    responses={**AuthResponses, 404: {"model": ErrorPublic, "description": "no report yet"}},
+)
 
 
 class AccuracyCostRow(BaseModel):

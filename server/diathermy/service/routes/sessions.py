@@ -74,7 +74,7 @@ async def get_session(rec: SessionDep) -> Any:
 @router.delete("/{session_id}", status_code=204, operation_id="delete_session")
 async def delete_session(rec: SessionDep, state: StateDep) -> Response:
     """Stop and delete a session and its files."""
-    await svc.delete_session(registry=state.registry, metrics=state.metrics, rec=rec)
+    await svc.delete_session(registry=state.registry, rec=rec)
     return Response(status_code=204)
 
 
@@ -102,7 +102,7 @@ async def update_electrode(
     body: ElectrodeUpdate,
 ) -> Any:
     """Move, re-power or switch an electrode; applies from the next step."""
-    control_id = await svc.update_electrode(
+    control_id, _ = await svc.update_electrode(
         registry=state.registry, rec=rec, name=name, update=body
     )
     return ElectrodeAck(name=name, control_id=control_id)
