@@ -14,7 +14,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from diathermy.errors import DiathermyError
 from diathermy.service.errors import classify
@@ -24,8 +24,15 @@ from diathermy.service.registry import SessionRecord
 from diathermy.service.sessions import advance, run_locked
 from diathermy.service.state import AppState
 
-if TYPE_CHECKING:
-    from diathermy.service.stream import StreamConnection
+
+class StreamClient(Protocol):
+    """What the driver needs of a stream connection (``stream.StreamConnection``)."""
+
+    async def send(self, msg: dict[str, Any]) -> None: ...
+
+    async def close(
+        self, code: int, error: str, message: str, field: str | None = None
+    ) -> None: ...
 
 
 class SessionDriver:
@@ -37,13 +44,13 @@ class SessionDriver:
         self.running = False
         self.rate_hz = 10.0
         self.pending = 0
-        self.clients: dict[Subscriber, StreamConnection] = {}
+        self.clients: dict[Subscriber, StreamClient] = {}
         self._wake = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
         self._next_t = 0.0
         self._loop_ref = asyncio.get_running_loop()
 
-    def attach(self, sub: Subscriber, conn: StreamConnection) -> None:
+    def attach(self, sub: Subscriber, conn: StreamClient) -> None:
         self.clients[sub] = conn
         self.rec.hub.add(sub)
         if self._task is None:

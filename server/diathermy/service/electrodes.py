@@ -21,7 +21,10 @@ class ElectrodeState(BaseModel):
     """One electrode at the session's current time, run-time changes applied."""
 
     name: str
-    position_m: tuple[float, float] = Field(description="(x, y) on the top surface, m")
+    # a list, not a tuple: schemathesis rejects the prefixItems of a tuple in a response schema
+    position_m: list[float] = Field(
+        min_length=2, max_length=2, description="(x, y) on the top surface, m"
+    )
     radius_m: float = Field(description="contact disk radius, m")
     drive: Literal["power", "current_density"]
     power_w: float = Field(description="set power, W (used when drive is 'power')")
@@ -51,7 +54,7 @@ def electrode_states(sim: Any, control_id: int) -> list[ElectrodeState]:
         out.append(
             ElectrodeState(
                 name=pose.name,
-                position_m=pose.position_m,
+                position_m=list(pose.position_m),
                 radius_m=pose.radius_m,
                 drive="current_density" if pose.drive == "current_density" else "power",
                 power_w=pose.power_w,
