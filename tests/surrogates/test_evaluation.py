@@ -11,7 +11,7 @@ import torch
 from diathermy.surrogates import CNNConfig, DisplacementCNN, predict
 from diathermy.surrogates.data import read_dataset_info, read_samples
 from diathermy.surrogates.evaluation import cross_validate, evaluate_model
-from diathermy.surrogates.training import TrainConfig
+from diathermy.surrogates.train_config import TrainConfig
 
 
 def _energy_proxy(u: np.ndarray, u_ref: np.ndarray, p: np.ndarray, phi: np.ndarray) -> float:

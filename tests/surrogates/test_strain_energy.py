@@ -19,7 +19,8 @@ from diathermy.surrogates.strain_energy import (
     GridStrainEnergy,
     relative_strain_energy_error_squared,
 )
-from diathermy.surrogates.training import TrainConfig, train
+from diathermy.surrogates.train_config import TrainConfig
+from diathermy.surrogates.training import train
 
 
 def _fields(grid: Grid, seed: int) -> tuple[np.ndarray, np.ndarray]:

@@ -15,7 +15,8 @@ import torch
 
 from diathermy.errors import CheckpointError
 from diathermy.surrogates import load_checkpoint
-from diathermy.surrogates.training import COSINE_FLOOR, TrainConfig, learning_rate, train
+from diathermy.surrogates.train_config import COSINE_FLOOR, TrainConfig, learning_rate
+from diathermy.surrogates.training import train
 
 FAST = TrainConfig(width=6, depth=3, epochs=6, batch_size=4, lr=3e-3, patience=50, seed=7)
 

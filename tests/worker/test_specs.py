@@ -6,7 +6,7 @@ from dataclasses import fields
 
 import pytest
 
-from diathermy.surrogates.training import TrainConfig
+from diathermy.surrogates.train_config import TrainConfig
 from diathermy.worker.specs import JobSpecError, TrainOptions, spec_from_dict
 from diathermy.worker.training_job import torchrun_command
 

@@ -18,7 +18,7 @@ _EXPORTS = {
     "load_checkpoint": "diathermy.surrogates.checkpoint",
     "save_checkpoint": "diathermy.surrogates.checkpoint",
     "predict": "diathermy.surrogates.inference",
-    "TrainConfig": "diathermy.surrogates.training",
+    "TrainConfig": "diathermy.surrogates.train_config",
     "train": "diathermy.surrogates.training",
     "evaluate_model": "diathermy.surrogates.evaluation",
     "cross_validate": "diathermy.surrogates.evaluation",

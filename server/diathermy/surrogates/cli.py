@@ -12,7 +12,7 @@ import os
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from diathermy.surrogates.training import TrainConfig
+    from diathermy.surrogates.train_config import TrainConfig
 
 
 def _positive_int(text: str) -> int:
@@ -64,7 +64,7 @@ def _fraction(text: str) -> float:
 
 def train_config_from_args(args: argparse.Namespace) -> TrainConfig:
     """The ``TrainConfig`` that ``diathermy train``'s parsed options describe."""
-    from diathermy.surrogates.training import TrainConfig
+    from diathermy.surrogates.train_config import TrainConfig
 
     return TrainConfig(
         width=args.width,
@@ -130,7 +130,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     from diathermy.surrogates.data import read_dataset_info
     from diathermy.surrogates.evaluation import cross_validate, evaluate_model
     from diathermy.surrogates.inference import default_device
-    from diathermy.surrogates.training import TrainConfig
+    from diathermy.surrogates.train_config import TrainConfig
 
     info = read_dataset_info(args.data)
     ckpt = load_checkpoint(args.model, expected_grid=info.grid_shape)

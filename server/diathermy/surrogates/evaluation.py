@@ -21,7 +21,8 @@ from diathermy.surrogates.checkpoint import load_checkpoint
 from diathermy.surrogates.cnn import DisplacementCNN
 from diathermy.surrogates.data import DatasetInfo, kfold_scenarios, read_dataset_info, read_samples
 from diathermy.surrogates.inference import predict
-from diathermy.surrogates.training import TrainConfig, train
+from diathermy.surrogates.train_config import TrainConfig
+from diathermy.surrogates.training import train
 
 # (u_pred (nz, ny, nx, 3) m, u_ref (same) m, pressure (nz, ny, nx) Pa, level set (nz, ny, nx) m)
 #   -> relative strain-energy error of u_pred against u_ref

@@ -12,7 +12,7 @@ import copy
 import math
 import os
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -35,82 +35,11 @@ from diathermy.surrogates.data import (
     read_samples,
     split_scenarios,
 )
+from diathermy.surrogates.devices import DistInfo, deterministic, init_distributed, resolve_device
 from diathermy.surrogates.losses import relative_l2_per_sample, training_loss
 from diathermy.surrogates.normalization import fit_scales
 from diathermy.surrogates.strain_energy import GridStrainEnergy
-
-AMP_DTYPES = {"none": None, "bf16": torch.bfloat16, "fp16": torch.float16}
-LR_SCHEDULES = ("constant", "cosine")
-COSINE_FLOOR = 0.01  # the cosine schedule ends at this fraction of the initial learning rate
-
-
-def learning_rate(lr: float, schedule: str, progress: float) -> float:
-    """The learning rate at ``progress`` in [0, 1] of the planned epochs (a pure function of it,
-    so a resumed run continues the same curve): constant, or a half cosine from lr to lr/100."""
-    if schedule == "constant":
-        return lr
-    t = min(max(progress, 0.0), 1.0)
-    return lr * (COSINE_FLOOR + (1.0 - COSINE_FLOOR) * 0.5 * (1.0 + math.cos(math.pi * t)))
-
-
-@dataclass(frozen=True)
-class TrainConfig:
-    """Hyper-parameters of one training run (stored in the checkpoint)."""
-
-    width: int = 16
-    depth: int = 5
-    epochs: int = 50
-    batch_size: int = 4
-    lr: float = 1e-3
-    val_fraction: float = 0.2
-    patience: int = 10
-    seed: int = 0
-    amp: str = "none"  # "none", "bf16" or "fp16" (fp16 needs CUDA)
-    device: str = "auto"  # "auto", "cpu", "cuda", "cuda:1", ...
-    num_workers: int = 0
-    scale_samples: int = 256  # training samples used to fit the normaliser
-    per_sample_amplitude: bool = True  # input/output scaled by each sample's max |p - p0|
-    strain_weight: float = 1.0  # weight of the displacement-difference (strain) loss
-    lr_schedule: str = "constant"  # "constant", or "cosine": lr decays to lr/100 over the epochs
-    energy_weight: float = 0.0  # weight of the squared relative strain-energy error (eq. 20/21)
-    mask_input: bool = False  # the tissue mask phi > 0 as a third input channel
-
-    def __post_init__(self) -> None:
-        checks = {
-            "epochs": self.epochs >= 0,
-            "batch_size": self.batch_size >= 1,
-            "lr": math.isfinite(self.lr) and self.lr > 0,
-            "patience": self.patience >= 1,
-            "num_workers": self.num_workers >= 0,
-            "scale_samples": self.scale_samples >= 1,
-            "strain_weight": math.isfinite(self.strain_weight) and self.strain_weight >= 0,
-            "energy_weight": math.isfinite(self.energy_weight) and self.energy_weight >= 0,
-        }
-        for name, ok in checks.items():
-            if not ok:
-                raise CheckpointError(f"training option {name} is invalid: {getattr(self, name)!r}")
-        if self.amp not in AMP_DTYPES:
-            raise CheckpointError(f"amp must be one of {sorted(AMP_DTYPES)}, got {self.amp!r}")
-        if self.lr_schedule not in LR_SCHEDULES:
-            raise CheckpointError(
-                f"lr_schedule must be one of {list(LR_SCHEDULES)}, got {self.lr_schedule!r}"
-            )
-        CNNConfig(width=self.width, depth=self.depth, mask_input=self.mask_input)
-
-
-@dataclass(frozen=True)
-class TrainResult:
-    """What a run did: where the best model went, and the per-epoch history."""
-
-    checkpoint: Path
-    epochs_run: int
-    best_epoch: int
-    best_val_loss: float
-    best_val_rel_l2: float
-    stopped_early: bool
-    history: tuple[dict[str, float], ...]
-    train_scenarios: tuple[int, ...]
-    val_scenarios: tuple[int, ...]
+from diathermy.surrogates.train_config import AMP_DTYPES, TrainConfig, TrainResult, learning_rate
 
 
 @dataclass(frozen=True)
@@ -120,53 +49,6 @@ class _Start:
     model: DisplacementCNN
     training_state: dict[str, Any] | None
     lineage: dict[str, Any] | None
-
-
-@dataclass(frozen=True)
-class _Dist:
-    rank: int = 0
-    world_size: int = 1
-    local_rank: int = 0
-    active: bool = False
-
-    @property
-    def is_main(self) -> bool:
-        return self.rank == 0
-
-
-def _init_distributed(device_kind: str) -> _Dist:
-    """Join the process group torchrun describes in the environment (no-op when not launched so)."""
-    if "RANK" not in os.environ or "WORLD_SIZE" not in os.environ:
-        return _Dist()
-    if not dist.is_initialized():
-        dist.init_process_group(backend="nccl" if device_kind == "cuda" else "gloo")
-    return _Dist(
-        rank=dist.get_rank(),
-        world_size=dist.get_world_size(),
-        local_rank=int(os.environ.get("LOCAL_RANK", "0")),
-        active=True,
-    )
-
-
-def resolve_device(name: str, local_rank: int = 0) -> torch.device:
-    """Device "auto" -> the local GPU when CUDA is available, else the CPU."""
-    if name == "auto":
-        return torch.device(f"cuda:{local_rank}" if torch.cuda.is_available() else "cpu")
-    device = torch.device(name)
-    if device.type == "cuda" and not torch.cuda.is_available():
-        raise CheckpointError(f"device {name!r} requested but CUDA is not available")
-    return device
-
-
-@contextlib.contextmanager
-def _deterministic(enabled: bool) -> Iterator[None]:
-    """Deterministic kernels for the duration of a CPU run, restoring the global flag after."""
-    previous = torch.are_deterministic_algorithms_enabled()
-    torch.use_deterministic_algorithms(enabled or previous)
-    try:
-        yield
-    finally:
-        torch.use_deterministic_algorithms(previous)
 
 
 def _batches(
@@ -324,11 +206,11 @@ def train(
     if amp_dtype is torch.float16 and device.type != "cuda":
         raise CheckpointError("fp16 mixed precision needs a CUDA device; use --amp bf16 on CPU")
     owns_group = not (dist.is_available() and dist.is_initialized())
-    ctx = _init_distributed("cuda" if want_cuda else "cpu")
+    ctx = init_distributed("cuda" if want_cuda else "cpu")
     if device.type == "cuda":
         torch.cuda.set_device(device)
     try:
-        with _deterministic(device.type == "cpu"):
+        with deterministic(device.type == "cpu"):
             return _train(
                 info,
                 Path(out_path),
@@ -351,7 +233,7 @@ def _train(
     info: DatasetInfo,
     out_path: Path,
     config: TrainConfig,
-    ctx: _Dist,
+    ctx: DistInfo,
     device: torch.device,
     amp_dtype: torch.dtype | None,
     resume: str | os.PathLike[str] | None,

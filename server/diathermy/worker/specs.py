@@ -76,7 +76,7 @@ class DatasetJobSpec(_Spec):
 
 
 class TrainOptions(_Spec):
-    """The fields of ``surrogates.training.TrainConfig`` (mirrored here so no torch is needed)."""
+    """The fields of ``surrogates.train_config.TrainConfig`` (mirrored here so no torch is needed)."""
 
     width: Annotated[int, Field(ge=1, le=256)] = 16
     depth: Annotated[int, Field(ge=1, le=32)] = 5

@@ -17,7 +17,8 @@ from typing import Any
 from diathermy.errors import CheckpointError
 from diathermy.surrogates.checkpoint import load_checkpoint
 from diathermy.surrogates.evaluation import evaluate_model
-from diathermy.surrogates.training import TrainConfig, train
+from diathermy.surrogates.train_config import TrainConfig
+from diathermy.surrogates.training import train
 from diathermy.worker.context import JobContext, eta_s
 from diathermy.worker.layout import job_dir
 from diathermy.worker.queue import JobProgress
