@@ -8,7 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from diathermy.worker.queue import JobNotFoundError, JobProgress, JobQueue
+from diathermy.worker.job_records import JobProgress
+from diathermy.worker.queue import JobNotFoundError, JobQueue
 from diathermy.worker.specs import JobKind, JobState
 
 SPEC = {"kind": "dataset", "config": {"grid": [5, 5, 9], "n_scenarios": 2, "n_steps": 2}}

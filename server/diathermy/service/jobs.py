@@ -30,7 +30,8 @@ from diathermy.service.job_schemas import (
     ModelList,
     ModelPublic,
 )
-from diathermy.worker.queue import Job, JobNotFoundError, JobQueue
+from diathermy.worker.job_records import Job
+from diathermy.worker.queue import JobNotFoundError, JobQueue
 from diathermy.worker.registry import (
     ModelInfo,
     ModelNotFoundError,

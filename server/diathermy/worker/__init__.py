@@ -1,6 +1,7 @@
 """The training worker: a job queue (SQLite), job processes, and the model registry."""
 
-from diathermy.worker.queue import Job, JobNotFoundError, JobProgress, JobQueue
+from diathermy.worker.job_records import Job, JobProgress
+from diathermy.worker.queue import JobNotFoundError, JobQueue
 from diathermy.worker.registry import (
     ModelInfo,
     ModelNotFoundError,

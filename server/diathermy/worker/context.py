@@ -6,7 +6,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from diathermy.worker.queue import Job, JobProgress, JobQueue
+from diathermy.worker.job_records import Job, JobProgress
+from diathermy.worker.queue import JobQueue
 
 
 class JobInterrupted(BaseException):

@@ -9,8 +9,8 @@ from typing import Any
 from diathermy.datagen.config import DatagenConfig
 from diathermy.datagen.generate import generate
 from diathermy.worker.context import JobContext, eta_s
+from diathermy.worker.job_records import JobProgress
 from diathermy.worker.layout import dataset_path
-from diathermy.worker.queue import JobProgress
 from diathermy.worker.specs import DatasetJobSpec
 
 

@@ -15,11 +15,18 @@ import secrets
 import sqlite3
 import time
 from collections.abc import Iterator
-from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 from diathermy.errors import DiathermyError
+from diathermy.worker.job_records import (
+    Heartbeat,
+    Job,
+    JobProgress,
+    LogLine,
+    ReapReport,
+    job_from_row,
+)
 from diathermy.worker.specs import JobKind, JobState
 
 DB_NAME = "jobs.sqlite"
@@ -59,96 +66,6 @@ CREATE INDEX IF NOT EXISTS job_log_job ON job_log (job_id, seq);
 
 class JobNotFoundError(DiathermyError, LookupError):
     """No job with this id belongs to the caller."""
-
-
-@dataclass(frozen=True)
-class JobProgress:
-    """How far a job is: fraction done, samples/scenarios written, epoch and losses, ETA in s."""
-
-    fraction: float = 0.0
-    samples: int | None = None
-    scenarios: int | None = None
-    epoch: int | None = None
-    epochs: int | None = None
-    train_loss: float | None = None
-    val_loss: float | None = None
-    val_rel_l2: float | None = None
-    eta_s: float | None = None
-
-    def to_dict(self) -> dict[str, Any]:
-        return {k: v for k, v in asdict(self).items() if v is not None}
-
-
-@dataclass(frozen=True)
-class Job:
-    """One job as stored; ``spec`` and ``result`` are the JSON objects they were saved as."""
-
-    id: str
-    kind: JobKind
-    state: JobState
-    owner: str
-    spec: dict[str, Any]
-    depends_on: str | None
-    progress: JobProgress
-    result: dict[str, Any] | None
-    error: str | None
-    attempts: int
-    max_attempts: int
-    worker: str | None
-    lease_expires: float | None
-    cancel_requested: bool
-    created_at: float
-    started_at: float | None
-    finished_at: float | None
-    version: int
-
-
-@dataclass(frozen=True)
-class LogLine:
-    seq: int
-    ts: float
-    line: str
-
-
-@dataclass(frozen=True)
-class Heartbeat:
-    """A worker's lease renewal: whether it still owns the job, whether to cancel it, and
-    whether its job process has already recorded the end."""
-
-    owned: bool
-    cancel: bool
-    finished: bool = False
-
-
-@dataclass(frozen=True)
-class ReapReport:
-    requeued: list[str] = field(default_factory=list)
-    failed: list[str] = field(default_factory=list)
-    cancelled: list[str] = field(default_factory=list)
-
-
-def _job(row: sqlite3.Row) -> Job:
-    progress = json.loads(row["progress"])
-    return Job(
-        id=row["id"],
-        kind=JobKind(row["kind"]),
-        state=JobState(row["state"]),
-        owner=row["owner"],
-        spec=json.loads(row["spec"]),
-        depends_on=row["depends_on"],
-        progress=JobProgress(**progress),
-        result=json.loads(row["result"]) if row["result"] else None,
-        error=row["error"],
-        attempts=int(row["attempts"]),
-        max_attempts=int(row["max_attempts"]),
-        worker=row["worker"],
-        lease_expires=row["lease_expires"],
-        cancel_requested=bool(row["cancel_requested"]),
-        created_at=float(row["created_at"]),
-        started_at=row["started_at"],
-        finished_at=row["finished_at"],
-        version=int(row["version"]),
-    )
 
 
 class JobQueue:
@@ -193,7 +110,7 @@ class JobQueue:
     @staticmethod
     def _get(con: sqlite3.Connection, job_id: str) -> Job | None:
         row = con.execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
-        return _job(row) if row is not None else None
+        return job_from_row(row) if row is not None else None
 
     # -- clients ---------------------------------------------------------------------------
 
@@ -247,7 +164,7 @@ class JobQueue:
             sql, args = sql + " AND state = ?", [*args, state.value]
         with self._connect() as con:
             rows = con.execute(sql + " ORDER BY created_at DESC LIMIT ?", (*args, limit))
-            return [_job(r) for r in rows.fetchall()]
+            return [job_from_row(r) for r in rows.fetchall()]
 
     def count_active(self, owner: str) -> int:
         """The owner's queued and running jobs."""
@@ -298,7 +215,7 @@ class JobQueue:
                 "SELECT * FROM jobs WHERE state = 'queued' ORDER BY created_at, rowid"
             ).fetchall()
             for row in rows:
-                job = _job(row)
+                job = job_from_row(row)
                 if not self._dependency_ready(con, job):
                     continue
                 con.execute(
@@ -340,7 +257,7 @@ class JobQueue:
             "SELECT * FROM jobs WHERE state = 'running' AND lease_expires < ?", (now,)
         ).fetchall()
         for row in rows:
-            job = _job(row)
+            job = job_from_row(row)
             lost = f"worker {job.worker} stopped renewing its lease (died or was killed)"
             if job.cancel_requested:
                 self._set_final(con, job.id, JobState.cancelled, None)

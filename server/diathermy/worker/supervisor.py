@@ -16,7 +16,8 @@ import time
 from pathlib import Path
 from types import FrameType
 
-from diathermy.worker.queue import Job, JobQueue
+from diathermy.worker.job_records import Job
+from diathermy.worker.queue import JobQueue
 from diathermy.worker.runner import job_function, run_job_process
 from diathermy.worker.specs import JobState
 

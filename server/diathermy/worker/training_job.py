@@ -20,8 +20,8 @@ from diathermy.surrogates.evaluation import evaluate_model
 from diathermy.surrogates.train_config import TrainConfig
 from diathermy.surrogates.training import train
 from diathermy.worker.context import JobContext, eta_s
+from diathermy.worker.job_records import JobProgress
 from diathermy.worker.layout import job_dir
-from diathermy.worker.queue import JobProgress
 from diathermy.worker.registry import ModelInfo, activate_model, list_models, register_model
 from diathermy.worker.specs import JobState, TrainingJobSpec
 
