@@ -18,7 +18,8 @@ from diathermy.physics.electric import (
     contact_weights,
     joule_heat,
 )
-from diathermy.physics.thermal import HeatStepper, heat_mesh
+from diathermy.physics.heat_operator import heat_mesh
+from diathermy.physics.thermal import HeatStepper
 
 K_TISSUE, RHO_C, T_AMB, T0, SIGMA = 0.574, 1019.8 * 3441.0, 298.15, 310.15, 0.33
 

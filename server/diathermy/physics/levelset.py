@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 import scipy.ndimage as ndi
@@ -21,10 +22,18 @@ import skfmm
 
 from diathermy.errors import SolverDivergedError
 from diathermy.mesh.grid import Grid
+from diathermy.physics import levelset_graded as graded
+from diathermy.physics.levelset_graded import CellSizes
 from diathermy.physics.levelset_law import CFL, MAX_SUBSTEPS, REINIT_BAND_CELLS, V0_M_PER_S
 
 Spacing = tuple[float, float, float]
 """Node spacing (dx, dy, dz) in m, the order of ``Grid.spacing_m``; arrays are (z, y, x)."""
+
+
+def grid_spacing(grid: Grid) -> Spacing | CellSizes:
+    """What ``advance`` and ``reinitialize`` take for a grid: its spacing (dx, dy, dz) in m if
+    uniform, else its cell lengths per axis (``Grid.cell_sizes_m()``)."""
+    return grid.spacing_m if grid.is_uniform else grid.cell_sizes_m()
 
 
 @dataclass(frozen=True)
@@ -152,7 +161,11 @@ def _godunov_gradient(flat: np.ndarray, st: _Stencil, h_zyx: Spacing) -> np.ndar
 
 def substeps_needed(F_max: float, spacing: Spacing, dt: float, cfl: float) -> int:
     """Smallest n >= 1 with (dt / n) F_max (1/dx + 1/dy + 1/dz) <= cfl."""
-    rate = F_max * sum(1.0 / h for h in spacing)
+    return _substeps(F_max * sum(1.0 / h for h in spacing), dt, cfl)
+
+
+def _substeps(rate: float, dt: float, cfl: float) -> int:
+    """Smallest n >= 1 with (dt / n) rate <= cfl, rate = max F sum_a 1/h_a in 1/s."""
     n = max(1, math.ceil(dt * rate / cfl))
     while dt / n * rate > cfl:  # ceil of a rounded quotient can fall one short
         n += 1
@@ -162,7 +175,7 @@ def substeps_needed(F_max: float, spacing: Spacing, dt: float, cfl: float) -> in
 def advance(
     phi: np.ndarray,
     F: np.ndarray,
-    spacing: Spacing,
+    spacing: Spacing | CellSizes,
     dt: float,
     *,
     cfl: float = CFL,
@@ -184,7 +197,9 @@ def advance(
     Args:
         phi: level set (nz, ny, nx) in m, every axis >= 2 nodes.
         F: front speed in m/s, phi's shape or flat (nz*ny*nx,).
-        spacing: (dx, dy, dz) in m.
+        spacing: (dx, dy, dz) in m, or on a graded grid the cell lengths per axis (dx (nx-1,),
+            dy, dz): one-sided differences over the node's own spacings, and the CFL limit
+            from each active node's smaller spacing per axis (``grid_spacing(grid)``).
         dt: physical step in s.
 
     Raises:
@@ -207,7 +222,11 @@ def advance(
     active = np.flatnonzero(F)
     if active.size == 0 or dt == 0:
         return LevelSetStep(out, 0, 0.0, int(active.size))
-    n_sub = substeps_needed(F_max, spacing, dt, cfl)
+    if graded.is_graded(spacing):
+        h_minus, h_plus = graded.node_spacings(phi.shape, active, spacing)  # type: ignore[arg-type]
+        n_sub = _substeps(graded.cfl_rate(F.reshape(-1)[active], h_minus, h_plus), dt, cfl)
+    else:
+        n_sub = substeps_needed(F_max, spacing, dt, cfl)  # type: ignore[arg-type]
     if n_sub > max_substeps:
         raise SolverDivergedError(
             f"level set needs {n_sub} sub-steps (> {max_substeps}) for max F = {F_max:.3g} m/s "
@@ -218,8 +237,25 @@ def advance(
         raise SolverDivergedError("level set phi is not finite where F > 0")
     dt_sub = dt / n_sub
     st = _stencil(phi.shape, active)
-    h_zyx = (spacing[2], spacing[1], spacing[0])
     rate = dt_sub * F.reshape(-1)[active]
+    if graded.is_graded(spacing):
+        for _ in range(n_sub):
+            old = flat[active]
+            g = graded.godunov_gradient(
+                flat,
+                st.center,
+                st.minus,
+                st.plus,
+                st.at_lo,
+                st.at_hi,
+                h_minus,
+                h_plus,
+                GHOST_SLOPE_CAP,
+            )
+            flat[active] = np.minimum(old - rate * g, old)
+        return LevelSetStep(out, n_sub, dt_sub, int(active.size))
+    h = cast(Spacing, spacing)
+    h_zyx = (h[2], h[1], h[0])
     for _ in range(n_sub):
         old = flat[active]
         flat[active] = np.minimum(old - rate * _godunov_gradient(flat, st, h_zyx), old)
@@ -228,7 +264,7 @@ def advance(
 
 def reinitialize(
     phi: np.ndarray,
-    spacing: Spacing,
+    spacing: Spacing | CellSizes,
     *,
     band_cells: float | None = REINIT_BAND_CELLS,
 ) -> np.ndarray:
@@ -246,16 +282,31 @@ def reinitialize(
     band_cells: only nodes within that many cells (of the largest spacing) of the front are
     touched, and only around the removed region (the untouched top is a distance already); None
     does the whole block. A block with no healthy or no removed node is returned unchanged.
+    On a graded grid (``spacing`` the cell lengths per axis) d comes from fast sweeping on the
+    node coordinates (``physics.rectilinear_distance``) and the band is counted in the largest
+    cell; the rule is the same.
     """
     phi = np.asarray(phi, dtype=float)
     if not ((phi < 0).any() and (phi > 0).any()):
         return phi.copy()
-    h_zyx = (spacing[2], spacing[1], spacing[0])
-    narrow = 0.0 if band_cells is None else band_cells * max(spacing)
-    box = (slice(None),) * 3 if band_cells is None else _around_removed(phi, h_zyx, 2 * narrow)
-    sub = np.ascontiguousarray(phi[box])  # skfmm misreads strided views
-    d = skfmm.distance(sub, dx=h_zyx, narrow=narrow)
-    d = np.ma.filled(d, np.nan) if np.ma.isMaskedArray(d) else np.asarray(d)
+    if graded.is_graded(spacing):
+        coords = graded.node_coordinates(spacing)  # type: ignore[arg-type]
+        narrow = 0.0 if band_cells is None else band_cells * max(float(np.max(c)) for c in spacing)
+        box = (
+            (slice(None),) * 3
+            if band_cells is None
+            else graded.around_removed(phi, coords, 2 * narrow)
+        )
+        sub = np.ascontiguousarray(phi[box])
+        d = graded.banded_distance(sub, [c[b] for c, b in zip(coords, box, strict=True)], narrow)
+    else:
+        h = cast(Spacing, spacing)
+        h_zyx = (h[2], h[1], h[0])
+        narrow = 0.0 if band_cells is None else band_cells * max(h)
+        box = (slice(None),) * 3 if band_cells is None else _around_removed(phi, h_zyx, 2 * narrow)
+        sub = np.ascontiguousarray(phi[box])  # skfmm misreads strided views
+        d = skfmm.distance(sub, dx=h_zyx, narrow=narrow)
+        d = np.ma.filled(d, np.nan) if np.ma.isMaskedArray(d) else np.asarray(d)
     deep = ndi.maximum_filter(sub, size=3, mode="nearest") < 0
     new_sub = np.where(deep, d, np.minimum(d, sub))
     keep = np.isnan(new_sub) | (np.sign(new_sub) != np.sign(sub))
