@@ -93,3 +93,10 @@ def test_uniform_scene_keeps_its_attributes(tmp_path):
 def test_surrogates_refuse_a_graded_grid(backend):
     with pytest.raises(SceneError, match="no .* model for this grid"):
         Simulation(graded_scene(mechanics={"backend": backend, "model": "x.pt"})).step()
+
+
+def test_dataset_samples_refuse_a_graded_scene(tmp_path):
+    from diathermy.datagen.engine_samples import write_scene_samples
+
+    with pytest.raises(ValueError, match="tiny use a graded grid"):
+        write_scene_samples([graded_scene()], tmp_path / "d.h5", n_steps=1)
