@@ -49,13 +49,35 @@ class ElectrodeUpdate(_Request):
 
 # ------------------------------------------------------------------ results
 class Grid(_Result):
-    """The node grid: shape (nz, ny, nx), spacing (dx, dy, dz) m, origin and size in m."""
+    """The node grid: shape (nz, ny, nx), origin and size in m; a uniform grid has a spacing
+    (dx, dy, dz) m, a graded one (fine under the electrode) its node coordinates ``axes_m``."""
 
     shape: tuple[int, int, int]
-    spacing_m: tuple[float, float, float]
+    spacing_m: tuple[float, float, float] | None = None
+    axes_m: list[list[float]] | None = None
     origin_m: tuple[float, float, float]
     size_m: tuple[float, float, float]
     n_nodes: int
+
+    @property
+    def is_uniform(self) -> bool:
+        """Whether the grid has one spacing per axis (else it is graded: see ``axes_m``)."""
+        return self.axes_m is None
+
+    def node_axes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Node coordinates along x (nx,), y (ny,), z (nz,) in m, uniform or graded."""
+        if self.axes_m is not None:
+            return (
+                np.asarray(self.axes_m[0]),
+                np.asarray(self.axes_m[1]),
+                np.asarray(self.axes_m[2]),
+            )
+        (x0, y0, z0), (lx, ly, lz), (nz, ny, nx) = self.origin_m, self.size_m, self.shape
+        return (
+            np.linspace(x0, x0 + lx, nx),
+            np.linspace(y0, y0 + ly, ny),
+            np.linspace(z0, z0 + lz, nz),
+        )
 
 
 class Snapshot(_Result):

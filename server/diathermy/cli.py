@@ -32,8 +32,9 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     from diathermy.worker.registry import RegistryModels
 
     data = resolve_scene(args.scene).model_dump()
-    if args.grid is not None:
+    if args.grid is not None:  # a uniform grid: it replaces a graded scene's resolution
         data["grid"] = args.grid
+        data["resolution"] = None
     if args.steps is not None:
         data["steps"] = args.steps
     if args.mechanics is not None:
@@ -62,8 +63,11 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 def _cmd_scenes(args: argparse.Namespace) -> int:
     for name in builtin_scene_names():
         s = builtin_scene(name)
-        nz, ny, nx = s.grid
-        print(f"{name:18s} {nz}x{ny}x{nx}  {s.steps:4d} steps  {', '.join(s.closed_effects)}")
+        nz, ny, nx = s.node_shape
+        kind = "graded" if s.resolution is not None else "uniform"
+        print(
+            f"{name:18s} {nz}x{ny}x{nx} {kind}  {s.steps:4d} steps  {', '.join(s.closed_effects)}"
+        )
         if args.verbose:
             print(f"    {s.description}")
     return 0
@@ -94,7 +98,11 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="?",
         help="built-in scene name or JSON/YAML file (default: the default scene)",
     )
-    s.add_argument("--grid", type=parse_grid, help="override the grid, nodes NZxNYxNX")
+    s.add_argument(
+        "--grid",
+        type=parse_grid,
+        help="a uniform grid of NZxNYxNX nodes (replaces the scene's grid and resolution)",
+    )
     s.add_argument("--steps", type=int, help="override the number of steps")
     s.add_argument("--out", default="runs/run.h5", help="run file to write (default runs/run.h5)")
     s.add_argument(

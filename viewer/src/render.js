@@ -54,14 +54,17 @@ export class View {
     this.dirty = true;
   }
 
-  // grid: the session's GridPublic (shape (nz, ny, nx), spacing_m, origin_m, size_m)
+  // grid: the session's GridPublic (shape (nz, ny, nx), spacing_m or, graded, axes_m, origin_m, size_m)
   setGrid(grid, electrodeRadiusM) {
     this.clear();
     const [nz, ny, nx] = grid.shape;
     const [x0, y0, z0] = grid.origin_m;
     const [lx, ly, lz] = grid.size_m;
     const L = Math.max(lx, ly, lz);
-    this.grid = { nx, ny, nz, x0, y0, z0, lx, ly, lz, dx: grid.spacing_m[0], dy: grid.spacing_m[1], top: z0 + lz, L };
+    // node x and y coordinates: the graded grid's axes_m, or origin + index * spacing
+    const xs = grid.axes_m ? grid.axes_m[0] : Array.from({ length: nx }, (_, i) => x0 + i * grid.spacing_m[0]);
+    const ys = grid.axes_m ? grid.axes_m[1] : Array.from({ length: ny }, (_, j) => y0 + j * grid.spacing_m[1]);
+    this.grid = { nx, ny, nz, x0, y0, z0, lx, ly, lz, xs, ys, top: z0 + lz, L };
     this.group.scale.setScalar(1 / L);
     this.group.position.set(-(x0 + lx / 2) / L, -(y0 + ly / 2) / L, -(z0 + lz / 2) / L);
 

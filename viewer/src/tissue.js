@@ -13,8 +13,8 @@ export function tissueMesh(g, colours, disp, phi, exaggeration) {
       const p = 3 * (j * g.nx + i);
       const e = disp ? exaggeration : 0;
       pos.push(
-        g.x0 + i * g.dx + (disp ? e * disp[p] : 0),
-        g.y0 + j * g.dy + (disp ? e * disp[p + 1] : 0),
+        g.xs[i] + (disp ? e * disp[p] : 0),
+        g.ys[j] + (disp ? e * disp[p + 1] : 0),
         g.top + (disp ? e * disp[p + 2] : 0),
       );
     }

@@ -213,8 +213,17 @@ def write_scene_samples(
     from diathermy.scene import builtin_scene, scene_from_dict
 
     scenes = [builtin_scene(n) if isinstance(n, str) else n for n in names]
-    if grid is not None:  # validated like a scene file's grid
-        scenes = [scene_from_dict({**s.model_dump(), "grid": list(grid)}) for s in scenes]
+    if grid is not None:  # validated like a scene file's grid; a uniform grid drops resolution
+        scenes = [
+            scene_from_dict({**s.model_dump(), "grid": list(grid), "resolution": None})
+            for s in scenes
+        ]
+    graded = [s.name for s in scenes if s.resolution is not None]
+    if graded:  # datasets (and the CNN that learns from them) live on uniform grids
+        raise ValueError(
+            f"scene(s) {', '.join(graded)} use a graded grid (resolution): dataset samples are "
+            "recorded on uniform grids only; give --grid NZ NY NX"
+        )
     if not scenes or any(
         (s.grid, s.block_m) != (scenes[0].grid, scenes[0].block_m) for s in scenes
     ):

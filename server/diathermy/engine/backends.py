@@ -49,15 +49,22 @@ def make_backend(
             rtol=cfg.rtol,
             ersatz_ratio=tissue.ersatz_stiffness_ratio,
         )
+    if cfg.backend in ("cnn", "pgd") and not ctx.disc.grid.is_uniform:
+        shape = "x".join(str(n) for n in ctx.disc.grid.shape)
+        raise SceneError(
+            f"mechanics.model: no {cfg.backend.upper()} model for this grid: the scene's grid is "
+            f"graded ({shape} nodes, scene.resolution) and the surrogates are trained on uniform "
+            "grids only; use mechanics.backend 'fem' or drop scene.resolution"
+        )
     if cfg.backend == "cnn":
         # torch loads only here: an FEM-only engine never imports it
         from diathermy.surrogates.backend import CNNBackend
 
         model = cfg.model
-        grid = tuple(ctx.scene.grid)
+        grid = ctx.disc.grid.shape
         path = Path(model) if model is not None and Path(model).is_file() else None
         if path is None:
-            path = (models or shipped_models)(model, grid)  # type: ignore[arg-type]
+            path = (models or shipped_models)(model, grid)
         return CNNBackend(
             ctx.disc.mesh,
             path,

@@ -24,7 +24,8 @@ from diathermy.engine.effects.mechanics import load_key
 from diathermy.engine.electrodes import ElectrodeOverride
 from diathermy.engine.ledger import EnergyLedger
 from diathermy.engine.state import SimulationState
-from diathermy.errors import CheckpointError
+from diathermy.errors import CheckpointError, MeshError
+from diathermy.mesh.grid_attrs import grid_attrs, grid_from_attrs
 from diathermy.physics.electric import contact_weights
 from diathermy.physics.topology import evaluate_topology
 from diathermy.scene import Scene
@@ -68,6 +69,7 @@ def save_checkpoint(
             overrides=json.dumps({k: asdict(v) for k, v in state.overrides.items()}),
             steps_since_reinit=state.memory.steps_since_reinit,
             mechanics_current=state.memory.mechanics_key is not None,
+            **grid_attrs(scene.node_grid()),
         )
         g = f.create_group("state")
         for name, arr in state.arrays.items():
@@ -95,8 +97,10 @@ def read_checkpoint(path: str | Path) -> SavedRun:
                 f"{path}: checkpoint format version {version} is not supported (expected {CHECKPOINT_VERSION})"
             )
         try:
+            scene = Scene.model_validate_json(f.attrs["scene"])
+            _check_grid(path, scene, f.attrs)
             return SavedRun(
-                scene=Scene.model_validate_json(f.attrs["scene"]),
+                scene=scene,
                 step=int(f.attrs["step"]),
                 time_s=float(f.attrs["time_s"]),
                 energy=EnergyLedger.from_totals(json.loads(f.attrs["energy_j"])),
@@ -106,10 +110,26 @@ def read_checkpoint(path: str | Path) -> SavedRun:
                 steps_since_reinit=int(f.attrs["steps_since_reinit"]),
                 mechanics_current=bool(f.attrs["mechanics_current"]),
             )
-        except (KeyError, ValueError, TypeError, OSError, ValidationError) as err:
+        except CheckpointError:
+            raise
+        except (KeyError, ValueError, TypeError, OSError, ValidationError, MeshError) as err:
             raise CheckpointError(
                 f"{path}: checkpoint is incomplete or corrupt ({type(err).__name__}: {err})"
             ) from None
+
+
+def _check_grid(path: str | Path, scene: Scene, attrs: Any) -> None:
+    """Raise ``CheckpointError`` when the saved node coordinates are not the scene's grid's."""
+    if "grid_shape" not in attrs:  # written before the grid was saved: the scene decides
+        return
+    saved, grid = grid_from_attrs(attrs), scene.node_grid()
+    if saved.shape != grid.shape or not all(
+        np.allclose(a, b, rtol=0.0, atol=1e-12)
+        for a, b in zip(saved.axes(), grid.axes(), strict=True)
+    ):
+        raise CheckpointError(
+            f"{path}: the saved grid {saved.shape} is not the grid its scene builds {grid.shape}"
+        )
 
 
 def check_fields(

@@ -80,10 +80,19 @@ def contact_key(
         # more cut): the disk goes down to the node layer under it, the top of the healthy
         # tets. Left in between, it loaded tets of sigma ~ 0 and the set power went into the
         # crater's vapor (R rose 100x and T passed 1100 K at dt 0.3 s).
-        dz = g.spacing_m[2]
-        k = np.floor((z - z0) / dz + 1e-9)
-        if z - (z0 + k * dz) < REMOVED_FRACTION * dz:
-            z = z0 + k * dz
+        if g.is_uniform:
+            dz = g.spacing_m[2]
+            k = np.floor((z - z0) / dz + 1e-9)
+            z_layer = z0 + k * dz
+        else:  # the node layer at or below z and the cell above it
+            zs = g.axes()[2]
+            kk = int(np.clip(np.searchsorted(zs, z, side="right") - 1, 0, zs.size - 2))
+            dz = float(zs[kk + 1] - zs[kk])
+            if zs[kk + 1] - z <= 1e-9 * dz:
+                kk = min(kk + 1, zs.size - 1)
+            z_layer = float(zs[kk])
+        if z - z_layer < REMOVED_FRACTION * dz:
+            z = z_layer
         if z <= z0 + 1e-9 * dz:
             return None
     return (x, y, z, pose.radius_m)

@@ -31,7 +31,7 @@ class EngineContext:
         self.scene = scene
         self.tissue = scene.material
         self.effects: tuple[str, ...] = scene.closed_effects
-        self.disc: Discretization = build_discretization(scene.grid, scene.block_m)
+        self.disc: Discretization = build_discretization(scene.node_grid())
         mesh, geom = self.disc.mesh, self.disc.geom
         self.top_z = float(self.disc.grid.origin_m[2] + self.disc.grid.size_m[2])
         stiffness = edge_stiffness(geom, mesh.tets, mesh.n_nodes)

@@ -36,11 +36,8 @@ class Discretization:
         return nodal.reshape(self.grid.shape + nodal.shape[1:])
 
 
-def build_discretization(
-    shape: tuple[int, int, int], block_m: tuple[float, float, float]
-) -> Discretization:
-    """Mesh and reusable geometry of an (nz, ny, nx) grid over a block (Lx, Ly, Lz)."""
-    grid = Grid(shape, size_m=block_m)
+def build_discretization(grid: Grid) -> Discretization:
+    """Mesh and reusable geometry of a grid (uniform or graded)."""
     mesh = build_tet_mesh(grid)
     geom = structured_geometry(mesh.points, mesh.tets, mesh.shape_id)
     return Discretization(

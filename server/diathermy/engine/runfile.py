@@ -9,7 +9,9 @@ Layout (stable; later effects add names, never change the layout):
                                                 removed (1 where the tissue is cut away)
     /reports              (n,)                  one JSON step report per record (UTF-8 strings)
 Root attributes: format, format_version, diathermy_version, scene (JSON), grid_shape (nz, ny, nx),
-spacing_m (dx, dy, dz), origin_m (x0, y0, z0), block_m (Lx, Ly, Lz).
+spacing_m (dx, dy, dz) on a uniform grid or the node coordinates node_x_m (nx,), node_y_m (ny,),
+node_z_m (nz,) on a graded one, origin_m (x0, y0, z0), block_m (Lx, Ly, Lz)
+(``mesh.grid_from_attrs`` reads the grid back).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import numpy as np
 
 from diathermy.errors import CheckpointError
 from diathermy.mesh import Grid
+from diathermy.mesh.grid_attrs import grid_attrs
 from diathermy.version import __version__
 
 RUN_FORMAT = "diathermy-run"
@@ -48,10 +51,7 @@ class RunWriter:
             format_version=RUN_FORMAT_VERSION,
             diathermy_version=__version__,
             scene=scene_json,
-            grid_shape=np.asarray(grid.shape),
-            spacing_m=np.asarray(grid.spacing_m),
-            origin_m=np.asarray(grid.origin_m),
-            block_m=np.asarray(grid.size_m),
+            **grid_attrs(grid),
         )
         f.create_dataset("time", shape=(0,), maxshape=(None,), dtype="f8", chunks=(1024,))
         f.create_dataset("step", shape=(0,), maxshape=(None,), dtype="i8", chunks=(1024,))

@@ -60,6 +60,13 @@ def cut_surface(phi: np.ndarray, grid: Grid) -> CutSurface:
     box = -phi[lo[0] : hi[0], lo[1] : hi[1], lo[2] : hi[2]]
     if not (box <= 0).any():  # nothing healthy left around the cut
         return empty_surface()
+    if not grid.is_uniform:  # marching cubes in index space, vertices mapped onto the axes
+        verts, faces, _, _ = marching_cubes(box, 0.0, allow_degenerate=False)
+        xyz = [
+            np.interp(verts[:, c] + lo[c], np.arange(a.size), a)
+            for c, a in enumerate(grid.axes()[::-1])
+        ]
+        return CutSurface(np.column_stack(xyz[::-1]), faces[:, ::-1].astype(np.int64))
     dx, dy, dz = grid.spacing_m
     verts, faces, _, _ = marching_cubes(box, 0.0, spacing=(dz, dy, dx), allow_degenerate=False)
     x0, y0, z0 = grid.origin_m

@@ -13,7 +13,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from diathermy.mesh import Grid, TetMesh
-from diathermy.physics.levelset import advance, front_speed, reinitialize, tet_to_node
+from diathermy.physics.levelset import (
+    advance,
+    front_speed,
+    grid_spacing,
+    reinitialize,
+    tet_to_node,
+)
 from diathermy.physics.levelset_law import LevelSetLaw
 from diathermy.physics.topology import Topology, evaluate_topology
 
@@ -62,13 +68,13 @@ def dissection_step(
         strain_energy, mesh.tets, volumes, mesh.n_nodes, include=~removed, incidence=incidence
     )
     F = front_speed(W_nodes, law.kappa_j_per_m3, law.v0_m_per_s)
-    adv = advance(level_set.reshape(grid.shape), F, grid.spacing_m, dt, cfl=law.cfl)
+    adv = advance(level_set.reshape(grid.shape), F, grid_spacing(grid), dt, cfl=law.cfl)
     new_phi = adv.phi
     steps_since_reinit += 1
     reinit = steps_since_reinit >= law.reinit_every
     if reinit:
         # keeps every node's sign and never raises phi next to the front (see reinitialize)
-        new_phi = reinitialize(new_phi, grid.spacing_m)
+        new_phi = reinitialize(new_phi, grid_spacing(grid))
         steps_since_reinit = 0
     phi = new_phi.ravel()
     topo = evaluate_topology(phi, mesh, volumes, previous)

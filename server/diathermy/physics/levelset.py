@@ -5,26 +5,35 @@ phi < 0 removed. The front moves into the tissue with normal speed F >= 0:
 
     phi_t + F |grad phi| = 0,    F = v0 max(0, W / kappa - 1).
 
-Irreversibility: ``advance`` never increases phi at any node (F >= 0), and ``reinitialize`` keeps
-the sign of every node and never raises phi at a node that can move the cut (see there).
+Irreversibility: ``advance`` never increases phi at any node (F >= 0), and ``reinitialize``
+(``physics.reinitialize``, re-exported here) keeps the sign of every node and never raises phi
+at a node that can move the cut (see there).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
-import scipy.ndimage as ndi
 import scipy.sparse as sp
-import skfmm
 
 from diathermy.errors import SolverDivergedError
 from diathermy.mesh.grid import Grid
-from diathermy.physics.levelset_law import CFL, MAX_SUBSTEPS, REINIT_BAND_CELLS, V0_M_PER_S
+from diathermy.physics import levelset_graded as graded
+from diathermy.physics.levelset_graded import CellSizes
+from diathermy.physics.levelset_law import CFL, MAX_SUBSTEPS, V0_M_PER_S
+from diathermy.physics.reinitialize import reinitialize as reinitialize  # re-exported
 
 Spacing = tuple[float, float, float]
 """Node spacing (dx, dy, dz) in m, the order of ``Grid.spacing_m``; arrays are (z, y, x)."""
+
+
+def grid_spacing(grid: Grid) -> Spacing | CellSizes:
+    """What ``advance`` and ``reinitialize`` take for a grid: its spacing (dx, dy, dz) in m if
+    uniform, else its cell lengths per axis (``Grid.cell_sizes_m()``)."""
+    return grid.spacing_m if grid.is_uniform else grid.cell_sizes_m()
 
 
 @dataclass(frozen=True)
@@ -152,7 +161,11 @@ def _godunov_gradient(flat: np.ndarray, st: _Stencil, h_zyx: Spacing) -> np.ndar
 
 def substeps_needed(F_max: float, spacing: Spacing, dt: float, cfl: float) -> int:
     """Smallest n >= 1 with (dt / n) F_max (1/dx + 1/dy + 1/dz) <= cfl."""
-    rate = F_max * sum(1.0 / h for h in spacing)
+    return _substeps(F_max * sum(1.0 / h for h in spacing), dt, cfl)
+
+
+def _substeps(rate: float, dt: float, cfl: float) -> int:
+    """Smallest n >= 1 with (dt / n) rate <= cfl, rate = max F sum_a 1/h_a in 1/s."""
     n = max(1, math.ceil(dt * rate / cfl))
     while dt / n * rate > cfl:  # ceil of a rounded quotient can fall one short
         n += 1
@@ -162,7 +175,7 @@ def substeps_needed(F_max: float, spacing: Spacing, dt: float, cfl: float) -> in
 def advance(
     phi: np.ndarray,
     F: np.ndarray,
-    spacing: Spacing,
+    spacing: Spacing | CellSizes,
     dt: float,
     *,
     cfl: float = CFL,
@@ -184,7 +197,9 @@ def advance(
     Args:
         phi: level set (nz, ny, nx) in m, every axis >= 2 nodes.
         F: front speed in m/s, phi's shape or flat (nz*ny*nx,).
-        spacing: (dx, dy, dz) in m.
+        spacing: (dx, dy, dz) in m, or on a graded grid the cell lengths per axis (dx (nx-1,),
+            dy, dz): one-sided differences over the node's own spacings, and the CFL limit
+            from each active node's smaller spacing per axis (``grid_spacing(grid)``).
         dt: physical step in s.
 
     Raises:
@@ -207,7 +222,11 @@ def advance(
     active = np.flatnonzero(F)
     if active.size == 0 or dt == 0:
         return LevelSetStep(out, 0, 0.0, int(active.size))
-    n_sub = substeps_needed(F_max, spacing, dt, cfl)
+    if graded.is_graded(spacing):
+        h_minus, h_plus = graded.node_spacings(phi.shape, active, spacing)  # type: ignore[arg-type]
+        n_sub = _substeps(graded.cfl_rate(F.reshape(-1)[active], h_minus, h_plus), dt, cfl)
+    else:
+        n_sub = substeps_needed(F_max, spacing, dt, cfl)  # type: ignore[arg-type]
     if n_sub > max_substeps:
         raise SolverDivergedError(
             f"level set needs {n_sub} sub-steps (> {max_substeps}) for max F = {F_max:.3g} m/s "
@@ -218,63 +237,26 @@ def advance(
         raise SolverDivergedError("level set phi is not finite where F > 0")
     dt_sub = dt / n_sub
     st = _stencil(phi.shape, active)
-    h_zyx = (spacing[2], spacing[1], spacing[0])
     rate = dt_sub * F.reshape(-1)[active]
+    if graded.is_graded(spacing):
+        for _ in range(n_sub):
+            old = flat[active]
+            g = graded.godunov_gradient(
+                flat,
+                st.center,
+                st.minus,
+                st.plus,
+                st.at_lo,
+                st.at_hi,
+                h_minus,
+                h_plus,
+                GHOST_SLOPE_CAP,
+            )
+            flat[active] = np.minimum(old - rate * g, old)
+        return LevelSetStep(out, n_sub, dt_sub, int(active.size))
+    h = cast(Spacing, spacing)
+    h_zyx = (h[2], h[1], h[0])
     for _ in range(n_sub):
         old = flat[active]
         flat[active] = np.minimum(old - rate * _godunov_gradient(flat, st, h_zyx), old)
     return LevelSetStep(out, n_sub, dt_sub, int(active.size))
-
-
-def reinitialize(
-    phi: np.ndarray,
-    spacing: Spacing,
-    *,
-    band_cells: float | None = REINIT_BAND_CELLS,
-) -> np.ndarray:
-    """Back to a signed distance (nz, ny, nx) in m, keeping the cut where it is (scikit-fmm).
-
-    d = skfmm.distance(phi) puts the zero set where linear interpolation of phi puts it. The rule:
-    - every node keeps its sign (removed stays removed, healthy stays healthy);
-    - a node within one cell of healthy tissue (some node of its 3x3x3 block is >= 0), and every
-      healthy node, gets min(d, phi): its phi never rises, so no tet the front cuts ever gets
-      less removed (the P1 removed volume never shrinks);
-    - a removed node whose whole 3x3x3 block is removed ("deep") gets d: every tet around it stays
-      fully removed whatever its value, and resetting it stops the removed side from steepening
-      without bound (min(d, phi) everywhere did that and left a front driven by F = a + b z,
-      re-initialised every step, 0.5-0.9 cells ahead of the exact one; this rule: < 0.06 cells).
-    band_cells: only nodes within that many cells (of the largest spacing) of the front are
-    touched, and only around the removed region (the untouched top is a distance already); None
-    does the whole block. A block with no healthy or no removed node is returned unchanged.
-    """
-    phi = np.asarray(phi, dtype=float)
-    if not ((phi < 0).any() and (phi > 0).any()):
-        return phi.copy()
-    h_zyx = (spacing[2], spacing[1], spacing[0])
-    narrow = 0.0 if band_cells is None else band_cells * max(spacing)
-    box = (slice(None),) * 3 if band_cells is None else _around_removed(phi, h_zyx, 2 * narrow)
-    sub = np.ascontiguousarray(phi[box])  # skfmm misreads strided views
-    d = skfmm.distance(sub, dx=h_zyx, narrow=narrow)
-    d = np.ma.filled(d, np.nan) if np.ma.isMaskedArray(d) else np.asarray(d)
-    deep = ndi.maximum_filter(sub, size=3, mode="nearest") < 0
-    new_sub = np.where(deep, d, np.minimum(d, sub))
-    keep = np.isnan(new_sub) | (np.sign(new_sub) != np.sign(sub))
-    new_sub[keep] = sub[keep]
-    new = phi.copy()
-    new[box] = new_sub
-    return new
-
-
-def _around_removed(phi: np.ndarray, h_zyx: Spacing, margin: float) -> tuple[slice, ...]:
-    """The bounding box of the removed nodes grown by margin (m) plus two nodes per side.
-
-    Outside it phi >= 0 and, with margin >= 2 x the band, every zero of phi within the band of a
-    node inside (the crater, or the untouched top right above it) lies inside it too.
-    """
-    neg = phi < 0
-    box = []
-    for ax, h in enumerate(h_zyx):
-        idx = np.flatnonzero(neg.any(axis=tuple(a for a in range(3) if a != ax)))
-        pad = math.ceil(margin / h) + 2
-        box.append(slice(max(int(idx[0]) - pad, 0), int(idx[-1]) + pad + 1))
-    return tuple(box)

@@ -207,11 +207,15 @@ def contact_height(
     phi = np.asarray(phi, dtype=float).reshape(grid.shape)
     x, y = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
     xs, ys, zs = grid.axes()
-    (dx, dy, _), (x0, y0, _) = grid.spacing_m, grid.origin_m
     tol = 1e-9 * max(grid.size_m)
     if np.any((x < xs[0] - tol) | (x > xs[-1] + tol) | (y < ys[0] - tol) | (y > ys[-1] + tol)):
         raise ValueError("contact point (x, y) lies outside the block")
-    fx, fy = (x.ravel() - x0) / dx, (y.ravel() - y0) / dy
+    if grid.is_uniform:
+        (dx, dy, _), (x0, y0, _) = grid.spacing_m, grid.origin_m
+        fx, fy = (x.ravel() - x0) / dx, (y.ravel() - y0) / dy
+    else:  # fractional node index along the graded axes
+        fx = np.interp(x.ravel(), xs, np.arange(xs.size))
+        fy = np.interp(y.ravel(), ys, np.arange(ys.size))
     i = np.clip(np.floor(fx), 0, grid.nx - 2).astype(np.int64)
     j = np.clip(np.floor(fy), 0, grid.ny - 2).astype(np.int64)
     wx, wy = np.clip(fx - i, 0, 1), np.clip(fy - j, 0, 1)

@@ -13,6 +13,7 @@ from diathermy.scene.models import (
     SolverConfig,
     close_effects,
 )
+from diathermy.scene.resolution import Resolution
 from diathermy.scene.resolve import parse_grid, resolve_scene
 
 __all__ = [
@@ -22,6 +23,7 @@ __all__ = [
     "ElectrodePath",
     "LevelSetConfig",
     "MechanicsConfig",
+    "Resolution",
     "Scene",
     "SolverConfig",
     "builtin_scene",

@@ -51,11 +51,22 @@ def sample_nodal(
     points_m: np.ndarray,
     *,
     origin_m: tuple[float, float, float],
-    spacing_m: tuple[float, float, float],
+    spacing_m: tuple[float, float, float] | None,
+    axes_m: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
-    """Trilinear samples of a grid field (nz, ny, nx[, c]) at points (n, 3) in m -> (n[, c])."""
+    """Trilinear samples of a grid field (nz, ny, nx[, c]) at points (n, 3) in m -> (n[, c]).
+
+    A uniform grid gives ``spacing_m``; a graded one its node coordinates ``axes_m`` (x, y, z),
+    where each point's fractional node index comes from the coordinates (binary search).
+    """
     pts = np.asarray(points_m, dtype=float).reshape(-1, 3)
-    idx = (pts - np.asarray(origin_m)) / np.asarray(spacing_m)  # (n, 3) as (i, j, k)
+    if axes_m is not None:
+        idx = np.column_stack(
+            [np.interp(pts[:, c], a, np.arange(len(a))) for c, a in enumerate(axes_m)]
+        )
+    else:
+        assert spacing_m is not None, "sample_nodal needs spacing_m or axes_m"
+        idx = (pts - np.asarray(origin_m)) / np.asarray(spacing_m)  # (n, 3) as (i, j, k)
     coords = idx[:, ::-1].T  # (3, n) as (k, j, i)
     if values.ndim == 3:
         return map_coordinates(values, coords, order=1, mode="nearest")

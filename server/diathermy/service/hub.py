@@ -137,7 +137,13 @@ def build_payload(sim: Any, sub: Subscription) -> dict[str, Any]:
     grid = sim.grid
     fields = {
         n: encode_array(
-            sample_nodal(sim.field(n), verts, origin_m=grid.origin_m, spacing_m=grid.spacing_m),
+            sample_nodal(
+                sim.field(n),
+                verts,
+                origin_m=grid.origin_m,
+                spacing_m=grid.spacing_m if grid.is_uniform else None,
+                axes_m=None if grid.is_uniform else grid.axes(),
+            ),
             sub.dtype,
         )
         for n in sub.fields

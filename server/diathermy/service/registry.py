@@ -49,7 +49,8 @@ def sim_meta(sim: Any) -> dict[str, Any]:
         "scene_name": sim.scene.name,
         "grid": {
             "shape": list(g.shape),
-            "spacing_m": list(g.spacing_m),
+            "spacing_m": list(g.spacing_m) if g.is_uniform else None,
+            "axes_m": None if g.is_uniform else [a.tolist() for a in g.axes()],
             "origin_m": list(g.origin_m),
             "size_m": list(g.size_m),
             "n_nodes": int(g.n_nodes),

@@ -40,7 +40,16 @@ class SessionCreate(_In):
 
 class GridPublic(BaseModel):
     shape: tuple[int, int, int] = Field(description="nodes (nz, ny, nx)")
-    spacing_m: tuple[float, float, float] = Field(description="(dx, dy, dz) in m")
+    spacing_m: tuple[float, float, float] | None = Field(
+        description="(dx, dy, dz) in m of a uniform grid; null on a graded grid (see axes_m)"
+    )
+    axes_m: list[list[float]] | None = Field(
+        None,
+        min_length=3,
+        max_length=3,
+        description="node coordinates [x (nx,), y (ny,), z (nz,)] in m of a graded grid; null on "
+        "a uniform grid",
+    )
     origin_m: tuple[float, float, float]
     size_m: tuple[float, float, float]
     n_nodes: int

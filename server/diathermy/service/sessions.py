@@ -107,8 +107,9 @@ async def create_session(
     if body.grid is not None:
         data = scene.model_dump()
         data["grid"] = body.grid
+        data["resolution"] = None  # a uniform grid replaces a graded scene's resolution
         scene = scene_from_dict(data)
-    check_grid(settings, scene.grid, scene.closed_effects)
+    check_grid(settings, scene.node_shape, scene.closed_effects)
     check_drive(scene)
 
     def build() -> SessionRecord:

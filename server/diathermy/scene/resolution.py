@@ -1,0 +1,141 @@
+"""Where a scene puts its nodes: a graded grid, fine over the working region under the electrodes.
+
+The ``resolution`` section of a scene (issue #21) replaces the uniform ``grid`` by a graded
+tensor-product grid (``Grid.graded``): cells of at most ``fine_m`` over a working box, growing by
+``growth`` per cell (capped at ``max_cell_m``) to the block's faces. The working box is given, or
+by default the electrodes' contacts (a path's bounding box for a moving electrode) plus
+``margin_m`` sideways and ``depth_m`` down from the top surface.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Annotated, Protocol
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from diathermy.mesh import Grid
+
+MAX_GRADED_NODES = 4_000_000
+"""Most nodes a graded scene may ask for (~60 GiB of engine memory at 16 kB per node)."""
+
+Point3 = tuple[
+    Annotated[float, Field(allow_inf_nan=False)],
+    Annotated[float, Field(allow_inf_nan=False)],
+    Annotated[float, Field(allow_inf_nan=False)],
+]
+
+
+class Resolution(BaseModel):
+    """A graded grid: fine cells over the working region, coarse in the far field. Lengths in m."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    fine_m: Annotated[float, Field(ge=2e-5, le=0.05, allow_inf_nan=False)] = Field(
+        0.5e-3, description="largest cell over the working region, m"
+    )
+    growth: Annotated[float, Field(ge=1.0, le=2.0, allow_inf_nan=False)] = Field(
+        1.25, description="largest ratio of neighbouring cells away from the working region"
+    )
+    max_cell_m: Annotated[float, Field(gt=0, le=0.05, allow_inf_nan=False)] = Field(
+        6.25e-3, description="largest cell anywhere, m"
+    )
+    margin_m: Annotated[float, Field(ge=0, le=0.1, allow_inf_nan=False)] = Field(
+        3e-3, description="default working region: sideways margin beyond the contacts, m"
+    )
+    depth_m: Annotated[float, Field(gt=0, le=1.0, allow_inf_nan=False)] = Field(
+        3e-3, description="default working region: depth below the top surface, m"
+    )
+    region_m: tuple[Point3, Point3] | None = Field(
+        None,
+        description="working box ((x, y, z) low corner, (x, y, z) high corner) in m; None: "
+        "the electrodes' contacts (a path's bounding box) plus margin_m, depth_m from the top",
+    )
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Resolution:
+        if self.max_cell_m < self.fine_m:
+            raise ValueError(
+                f"max_cell_m ({self.max_cell_m} m) must be at least fine_m ({self.fine_m} m)"
+            )
+        if self.region_m is not None:
+            lo, hi = self.region_m
+            if any(b < a for a, b in zip(lo, hi, strict=True)):
+                raise ValueError(f"region_m: high corner {hi} must not lie below the low {lo}")
+        return self
+
+
+class _Path(Protocol):
+    @property
+    def waypoints_m(self) -> Sequence[tuple[float, float]]: ...
+    @property
+    def kind(self) -> str: ...
+
+
+class _Electrode(Protocol):
+    @property
+    def position_m(self) -> tuple[float, float]: ...
+    @property
+    def radius_m(self) -> float: ...
+    @property
+    def path(self) -> _Path | None: ...
+
+
+def contact_footprint(electrode: _Electrode) -> tuple[np.ndarray, np.ndarray]:
+    """(x, y) low and high corners in m of every point the electrode's contact disk can cover.
+
+    A spline path (uniform Catmull-Rom) stays within the hull of its Bezier control points,
+    P_i + (P_i+1 - P_i-1) / 6, so the waypoints' box grows by the largest such offset.
+    """
+    pts = np.array([electrode.position_m], dtype=float)
+    pad = float(electrode.radius_m)
+    if electrode.path is not None:
+        wp = np.asarray(electrode.path.waypoints_m, dtype=float)
+        pts = np.vstack([pts, wp])
+        if electrode.path.kind == "spline":
+            ext = np.vstack([wp[:1], wp, wp[-1:]])
+            pad += float(np.linalg.norm(ext[2:] - ext[:-2], axis=1).max()) / 6.0
+    return pts.min(axis=0) - pad, pts.max(axis=0) + pad
+
+
+def working_region(
+    resolution: Resolution,
+    block_m: Sequence[float],
+    electrodes: Sequence[_Electrode],
+    origin_m: Sequence[float] = (0.0, 0.0, 0.0),
+) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """The working box ((x, y, z) low, (x, y, z) high) in m, clipped to the block."""
+    o, size = np.asarray(origin_m, dtype=float), np.asarray(block_m, dtype=float)
+    if resolution.region_m is not None:
+        lo, hi = (np.asarray(c, dtype=float) for c in resolution.region_m)
+    else:
+        top = o[2] + size[2]
+        if electrodes:
+            corners = [contact_footprint(e) for e in electrodes]
+            lo_xy = np.min([c[0] for c in corners], axis=0) - resolution.margin_m
+            hi_xy = np.max([c[1] for c in corners], axis=0) + resolution.margin_m
+        else:  # no electrode: the centre of the top face
+            lo_xy = hi_xy = o[:2] + 0.5 * size[:2]
+        lo = np.array([lo_xy[0], lo_xy[1], top - resolution.depth_m])
+        hi = np.array([hi_xy[0], hi_xy[1], top])
+    lo, hi = np.clip(lo, o, o + size), np.clip(hi, o, o + size)
+    return (
+        (float(lo[0]), float(lo[1]), float(lo[2])),
+        (float(hi[0]), float(hi[1]), float(hi[2])),
+    )
+
+
+def graded_grid(
+    resolution: Resolution, block_m: Sequence[float], electrodes: Sequence[_Electrode]
+) -> Grid:
+    """The scene's graded grid over the block (Lx, Ly, Lz) in m (origin at 0)."""
+    lo, hi = working_region(resolution, block_m, electrodes)
+    return Grid.graded(
+        lo,
+        hi,
+        resolution.fine_m,
+        growth=resolution.growth,
+        max_cell_m=resolution.max_cell_m,
+        size_m=(float(block_m[0]), float(block_m[1]), float(block_m[2])),
+    )

@@ -1,0 +1,102 @@
+"""The engine on a graded grid (scene.resolution): it heats, boils and cuts, closes its energy
+balance, restores bit for bit, and its run file, checkpoint and VTU carry the node coordinates."""
+
+from __future__ import annotations
+
+import meshio
+import numpy as np
+import pytest
+
+from diathermy.engine.run import run_scene
+from diathermy.engine.runfile import read_run
+from diathermy.engine.simulation import Simulation
+from diathermy.errors import SceneError
+from diathermy.mesh import grid_from_attrs
+from diathermy.scene import Resolution
+from tests.engine.scenes import tiny_scene
+
+RES = Resolution(fine_m=0.5e-3, max_cell_m=2e-3, margin_m=1e-3, depth_m=1.5e-3)
+
+
+def graded_scene(**overrides):
+    return tiny_scene(resolution=RES, **overrides)
+
+
+def test_graded_scene_meshes_fine_under_the_electrode():
+    scene = graded_scene()
+    grid = scene.node_grid()
+    assert not grid.is_uniform and scene.node_shape == grid.shape
+    x, y, z = grid.axes()
+    # the contact (radius 1.17 mm) plus 1 mm margin lies in cells of at most 0.5 mm
+    for a, c, half in ((x, 0.01, 2.17e-3), (y, 0.005, 2.17e-3)):
+        inside = (a[:-1] >= c - half - 1e-12) & (a[1:] <= c + half + 1e-12)
+        assert np.diff(a)[inside].max() <= 0.5e-3 + 1e-12
+    assert np.diff(z)[z[:-1] >= 0.01 - 1.5e-3 - 1e-12].max() <= 0.5e-3 + 1e-12
+    assert max(np.diff(a).max() for a in (x, y, z)) <= 2e-3 + 1e-12
+
+
+def test_graded_run_cuts_and_balances_energy():
+    sim = Simulation(graded_scene())
+    reports = sim.run(25)
+    cut = [r.cut_volume_m3 for r in reports]
+    assert cut[-1] > 0 and all(b >= a for a, b in zip(cut, cut[1:], strict=False))
+    assert 0 < reports[-1].crater_depth_m < 0.01
+    e = reports[-1].energy
+    assert e["latent_stored"] > 0
+    assert abs(e["imbalance"]) <= 1e-3 * e["joule_in"]
+    (key,) = sim.ctx.contacts.entries
+    assert key[2] < sim.ctx.top_z  # the disk follows the crater floor on the graded axes
+
+
+def test_graded_checkpoint_restores_bit_for_bit(tmp_path):
+    sim = Simulation(graded_scene())
+    sim.run(12)
+    path = sim.save_checkpoint(tmp_path / "c.h5")
+    saved = read_grid_attrs(path)
+    assert all(np.array_equal(a, b) for a, b in zip(saved.axes(), sim.grid.axes(), strict=True))
+    sim.run(5)
+    back = Simulation.load_checkpoint(path)
+    back.run(5)
+    for name, arr in sim.state.arrays.items():
+        assert np.array_equal(arr, back.state.arrays[name]), name
+
+
+def read_grid_attrs(path):
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        return grid_from_attrs(dict(f.attrs))
+
+
+def test_run_file_and_vtu_carry_the_node_coordinates(tmp_path):
+    scene = graded_scene(steps=2, effects=["electric", "thermal"])
+    run_scene(scene, out=tmp_path / "r.h5", vtu_dir=tmp_path / "vtu", progress=False)
+    run = read_run(tmp_path / "r.h5")
+    assert "spacing_m" not in run["attrs"]
+    back, grid = grid_from_attrs(run["attrs"]), scene.node_grid()
+    assert back.shape == grid.shape
+    assert all(np.array_equal(a, b) for a, b in zip(back.axes(), grid.axes(), strict=True))
+    assert run["fields"]["temperature"].shape == (2, *grid.shape)
+    (vtu,) = sorted((tmp_path / "vtu").glob("*.vtu"))[-1:]
+    assert np.allclose(meshio.read(vtu).points, grid.points())
+
+
+def test_uniform_scene_keeps_its_attributes(tmp_path):
+    scene = tiny_scene(steps=1, effects=["electric"])
+    assert "resolution" not in scene.model_dump()  # run files and checkpoints byte-identical
+    run_scene(scene, out=tmp_path / "u.h5", progress=False)
+    attrs = read_run(tmp_path / "u.h5")["attrs"]
+    assert "node_x_m" not in attrs and np.allclose(attrs["spacing_m"], scene.node_grid().spacing_m)
+
+
+@pytest.mark.parametrize("backend", ["cnn", "pgd"])
+def test_surrogates_refuse_a_graded_grid(backend):
+    with pytest.raises(SceneError, match="no .* model for this grid"):
+        Simulation(graded_scene(mechanics={"backend": backend, "model": "x.pt"})).step()
+
+
+def test_dataset_samples_refuse_a_graded_scene(tmp_path):
+    from diathermy.datagen.engine_samples import write_scene_samples
+
+    with pytest.raises(ValueError, match="tiny use a graded grid"):
+        write_scene_samples([graded_scene()], tmp_path / "d.h5", n_steps=1)

@@ -1,0 +1,94 @@
+"""The scene's resolution section: defaults around the electrodes, validation naming the field,
+and the uniform grid untouched when it is absent."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from pydantic import ValidationError
+
+from diathermy.mesh import Grid, grid_attrs, grid_from_attrs
+from diathermy.scene import Resolution, Scene, builtin_scene
+from diathermy.scene.resolution import working_region
+from diathermy.service.encoding import sample_nodal
+
+
+def with_resolution(name: str, **res: object) -> Scene:
+    data = builtin_scene(name).model_dump()
+    data["resolution"] = res
+    return Scene.model_validate(data)
+
+
+def test_without_resolution_the_grid_is_the_uniform_one():
+    scene = builtin_scene("default")
+    assert scene.resolution is None and "resolution" not in scene.model_dump()
+    assert scene.node_grid() == Grid(scene.grid, size_m=scene.block_m)
+    assert scene.node_shape == (33, 33, 65)
+
+
+def test_default_region_covers_the_contact_or_the_path():
+    fixed = with_resolution("fixed-electrode")
+    lo, hi = working_region(fixed.resolution, fixed.block_m, fixed.electrodes)
+    reach = 1.17e-3 + 3e-3
+    assert np.allclose(lo, (0.1 - reach, 0.05 - reach, 0.1 - 3e-3))
+    assert np.allclose(hi, (0.1 + reach, 0.05 + reach, 0.1))
+    moving = with_resolution("moving-electrode", fine_m=2e-3)
+    lo, hi = working_region(moving.resolution, moving.block_m, moving.electrodes)
+    wp = np.asarray(moving.electrodes[0].path.waypoints_m)
+    assert np.all(wp.min(axis=0) - 4e-3 >= lo[:2]) and np.all(wp.max(axis=0) + 4e-3 <= hi[:2])
+    g = moving.node_grid()
+    x = g.axes()[0]
+    assert np.diff(x)[(x[:-1] >= wp[0, 0]) & (x[1:] <= wp[-1, 0])].max() <= 2e-3 + 1e-12
+
+
+def test_explicit_region_and_round_trip():
+    scene = with_resolution(
+        "fixed-electrode", fine_m=1e-3, region_m=((0.09, 0.04, 0.095), (0.11, 0.06, 0.1))
+    )
+    back = Scene.model_validate_json(scene.model_dump_json())
+    assert back == scene and back.node_grid() == scene.node_grid()
+    g = scene.node_grid()
+    again = grid_from_attrs(grid_attrs(g))
+    assert again.shape == g.shape
+    assert all(np.array_equal(a, b) for a, b in zip(again.axes(), g.axes(), strict=True))
+
+
+BAD = {
+    "fine_m": st.one_of(st.floats(max_value=1.9e-5), st.floats(min_value=0.051), st.just(math.nan)),
+    "growth": st.one_of(st.floats(max_value=0.999), st.floats(min_value=2.001), st.just(math.inf)),
+    "max_cell_m": st.one_of(st.floats(max_value=0.0), st.floats(min_value=0.0501)),
+    "margin_m": st.one_of(st.floats(max_value=-1e-9), st.floats(min_value=0.1001)),
+    "depth_m": st.one_of(st.floats(max_value=0.0), st.floats(min_value=1.001)),
+}
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.sampled_from(sorted(BAD)).flatmap(lambda k: st.tuples(st.just(k), BAD[k])))
+def test_bad_values_name_the_field(bad):
+    field, value = bad
+    with pytest.raises(ValidationError, match=f"resolution.{field}"):
+        with_resolution("fixed-electrode", **{field: value})
+
+
+def test_inconsistent_or_huge_requests_are_refused():
+    with pytest.raises(ValidationError, match="max_cell_m .* must be at least fine_m"):
+        Resolution(fine_m=2e-3, max_cell_m=1e-3)
+    with pytest.raises(ValidationError, match="region_m: high corner"):
+        Resolution(region_m=((0.1, 0.05, 0.1), (0.09, 0.06, 0.1)))
+    with pytest.raises(ValidationError, match="resolution: the graded grid would have"):
+        with_resolution("moving-electrode", fine_m=1e-4, growth=1.01)
+
+
+def test_sample_nodal_on_graded_axes_is_exact_for_linear_fields():
+    scene = with_resolution("fixed-electrode", fine_m=2e-3)
+    g = scene.node_grid()
+    p = g.points()
+    field = (1.0 + 2.0 * p[:, 0] - 3.0 * p[:, 1] + 5.0 * p[:, 2]).reshape(g.shape)
+    rng = np.random.default_rng(0)
+    pts = rng.uniform((0, 0, 0), g.size_m, size=(50, 3))
+    got = sample_nodal(field, pts, origin_m=g.origin_m, spacing_m=None, axes_m=g.axes())
+    assert np.allclose(got, 1.0 + 2.0 * pts[:, 0] - 3.0 * pts[:, 1] + 5.0 * pts[:, 2])
