@@ -117,3 +117,29 @@ def live(tmp_path: Path) -> Iterator[LiveServer]:
 def api(live: LiveServer) -> Iterator[httpx.Client]:
     with live.client() as c:
         yield c
+
+
+def descendants(pid: int) -> list[int]:
+    """Child processes of ``pid``, recursively (a server's forkserver and engine processes)."""
+    out: list[int] = []
+    for task in Path(f"/proc/{pid}/task").glob("*/children"):
+        for child in task.read_text().split():
+            out += [int(child), *descendants(int(child))]
+    return out
+
+
+def running(pid: int) -> bool:
+    """Whether ``pid`` is a live process (neither gone nor a zombie)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except FileNotFoundError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
+def assert_ended(pids: list[int], timeout_s: float = 10.0) -> None:
+    """Every process of ``pids`` ends within ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while any(running(p) for p in pids):
+        assert time.monotonic() < deadline, f"still running: {[p for p in pids if running(p)]}"
+        time.sleep(0.05)

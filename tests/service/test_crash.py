@@ -28,7 +28,7 @@ from websockets.sync.client import connect
 from diathermy.engine.simulation import Simulation
 from diathermy.scene import builtin_scene, scene_from_dict
 from diathermy.service.encoding import decode_array, unpack
-from tests.service.conftest import TOKEN_A, free_port
+from tests.service.conftest import TOKEN_A, assert_ended, descendants, free_port
 
 ROOT = Path(__file__).resolve().parents[2]
 GRID = [9, 9, 17]
@@ -68,10 +68,12 @@ class Server:
             assert time.monotonic() < deadline, "server did not come up"
             time.sleep(0.05)
         self.api = httpx.Client(base_url=self.url, headers=HEADERS, timeout=30)
+        self.children: list[int] = []  # the processes it had started when it was killed
 
     def kill_after(self, delay_s: float) -> threading.Thread:
         def kill() -> None:
             time.sleep(delay_s)
+            self.children = descendants(self.proc.pid)
             self.proc.kill()
 
         thread = threading.Thread(target=kill, daemon=True)
@@ -168,6 +170,8 @@ def test_kill_9_during_rest_steps_loses_no_acknowledged_step(tmp_path: Path) -> 
             acked, in_flight = rest_round(server, sid, rng, commands)
             server.proc.wait(timeout=30)
             assert server.proc.returncode == -9
+            assert len(server.children) >= 2  # the forkserver and the session's engine
+            assert_ended(server.children)  # no orphan engine process
             server.close()
             server = Server(data, log, autosave_s=rng.uniform(0.2, 1.0))
             step = server.api.get(f"/v1/sessions/{sid}").json()["step"]
@@ -194,6 +198,8 @@ def test_kill_9_during_a_stream_loses_no_acknowledged_step(tmp_path: Path) -> No
             kill_at = time.monotonic() + rng.uniform(0.5, 1.5)
             acked = stream_round(server, sid, rng, controls, kill_at)
             server.proc.wait(timeout=30)
+            assert len(server.children) >= 2
+            assert_ended(server.children)
             server.close()
             server = Server(data, log, autosave_s=rng.uniform(0.2, 1.0))
             step = server.api.get(f"/v1/sessions/{sid}").json()["step"]

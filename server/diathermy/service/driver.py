@@ -1,10 +1,10 @@
 """The stepping driver of a streamed session: continuous at a rate, or n steps on demand.
 
-While running, the engine steps in a worker thread that keeps the session lock for as many steps
-as it can: it paces itself to the requested rate there and returns only when paused or when
-something else waits for the session (an electrode control, a REST read, a subscription), which
-then runs before the next step. So the engine's rate does not depend on the event loop, which
-only writes frames to sockets. Electrode controls do not stop the batch: they are handed to it and
+While running, a worker thread keeps the session lock for as many steps as it can, each one
+taken by the session's engine process: it paces itself to the requested rate there and returns
+only when paused or when something else waits for the session (an electrode control, a REST read,
+a subscription), which then runs before the next step. So the engine's rate does not depend on
+the event loop, which only writes frames to sockets. Electrode controls do not stop the batch: they are handed to it and
 applied between two steps, so a control waits at most for the step in progress. Steps asked for
 with ``step`` are taken one per batch, so that a client reading at once gets every frame.
 """
@@ -114,7 +114,7 @@ class SessionDriver:
             await conn.close(code, error, message, field)
 
     def _batch(self, sim: Any) -> bool:
-        """Step while there is work and nobody else waits for the session (engine thread).
+        """Step while there is work and nobody else waits for the session (worker thread).
 
         Electrode controls offered meanwhile (``SessionRecord.offer``) are applied between
         steps. Returns True after taking one requested step (the event loop counts it off)."""
@@ -151,7 +151,7 @@ class SessionDriver:
         return False
 
     def _apply_controls(self, sim: Any) -> None:
-        """Run the offered controls in order and hand each its result (engine thread)."""
+        """Run the offered controls in order and hand each its result (worker thread)."""
         loop = self._loop_ref
         while True:
             with self.rec.batch_lock:

@@ -12,6 +12,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, Field
 
 from diathermy.engine.electrodes import electrode_pose
+from diathermy.service.engine_process import RemoteSim
 from diathermy.service.exceptions import NotFoundError
 from diathermy.service.registry import SessionRecord, SessionRegistry
 from diathermy.service.sessions import run_locked
@@ -46,7 +47,7 @@ class ElectrodeList(BaseModel):
 
 
 def electrode_states(sim: Any, control_id: int) -> list[ElectrodeState]:
-    """Every electrode of ``sim`` as it stands at ``sim.time_s`` (engine thread, under the lock)."""
+    """Every electrode of ``sim`` as it stands at ``sim.time_s`` (engine process)."""
     out = []
     for el in sim.scene.electrodes:
         override = sim.state.overrides.get(el.name)
@@ -75,8 +76,8 @@ async def read_electrodes(
 ) -> list[ElectrodeState]:
     """All electrodes of a session, or the one called ``name`` (NotFoundError, HTTP 404)."""
 
-    def read(sim: Any) -> list[ElectrodeState]:
-        states = electrode_states(sim, rec.control_id)
+    def read(sim: RemoteSim) -> list[ElectrodeState]:
+        states: list[ElectrodeState] = sim.call(electrode_states, rec.control_id)
         if name is None:
             return states
         chosen = [s for s in states if s.name == name]

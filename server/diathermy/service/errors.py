@@ -21,6 +21,7 @@ from diathermy.errors import (
 from diathermy.service.exceptions import (
     AuthError,
     BadRequestError,
+    EngineProcessError,
     LimitExceededError,
     NotFoundError,
     RequestTooLargeError,
@@ -48,6 +49,7 @@ STATUS: list[tuple[type[Exception], int, str]] = [
     (MeshError, 422, "mesh_error"),
     (SolverDivergedError, 422, "solver_diverged"),
     (CheckpointError, 409, "checkpoint_error"),
+    (EngineProcessError, 503, "engine_failed"),
     (DiathermyError, 400, "error"),
 ]
 """Exception class -> (HTTP status, error code); the first match wins, so subclasses come first."""
@@ -158,6 +160,7 @@ ErrorResponses: dict[int | str, dict[str, object]] = {
         (413, "request body too large"),
         (422, "invalid input or over a limit; 'field' names it"),
         (429, "too many sessions (or active jobs) for this token"),
+        (503, "the session's engine process ended; retry (it reloads from disk)"),
     ]
 }
 """The error responses every session route documents."""

@@ -47,3 +47,7 @@ class TooManyJobsError(LimitExceededError):
 
 class BadRequestError(ServiceError, ValueError):
     """A request is well-formed but asks for something that does not exist (field, snapshot)."""
+
+
+class EngineProcessError(ServiceError):
+    """A session's engine process ended; the session reloads from disk on next use."""

@@ -1,8 +1,8 @@
 """Fan-out of step frames to stream clients: one pending frame per client, newest wins.
 
-The engine thread calls ``StreamHub.publish`` after each step. It builds and msgpack-encodes
-each frame once per distinct subscription (not once per client), so the event loop only copies
-bytes to sockets. Each client's sender task takes frames from its ``FrameSlot``: a slow client
+After each step the engine process builds and msgpack-encodes each frame once per distinct
+subscription (not once per client, ``engine_ops.step_frames``) and ``StreamHub.deliver`` hands
+the bytes to the clients, so the event loop only copies bytes to sockets. Each client's sender task takes frames from its ``FrameSlot``: a slow client
 never makes the server queue frames, because a new frame replaces the one it has not taken yet,
 and the replaced frame is counted as dropped.
 """
@@ -85,20 +85,23 @@ class FrameSlot:
     """
 
     def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
-        self._loop = loop
+        self.loop = loop
         self._lock = threading.Lock()
         self._frame: Frame | None = None
         self._event = asyncio.Event()
         self.dropped = 0
 
-    def put(self, frame: Frame) -> bool:
-        """Store ``frame``; returns True when it replaced an untaken one (a drop)."""
+    def put(self, frame: Frame, *, notify: bool = True) -> bool:
+        """Store ``frame``; returns True when it replaced an untaken one (a drop).
+
+        ``notify=False`` leaves waking the sender to the caller (``wake_all``)."""
         with self._lock:
             replaced = self._frame is not None
             self._frame = frame
             if replaced:
                 self.dropped += 1
-        self._loop.call_soon_threadsafe(self._event.set)
+        if notify:
+            self.loop.call_soon_threadsafe(self._event.set)
         return replaced
 
     def wake(self) -> None:
@@ -175,21 +178,27 @@ class StreamHub:
         with self._lock:
             return len(self._subscribers)
 
-    def publish(self, sim: Any, *, session_id: str, control_id: int) -> int:
-        """Offer the current state to the subscribers due this step; returns the drops."""
+    def subscriptions(self) -> tuple[Subscription, ...]:
+        """The distinct subscriptions (the frames a step builds)."""
         with self._lock:
-            targets = [s for s in self._subscribers if sim.step_index % s.subscription.every == 0]
-        if not targets:
+            return tuple(dict.fromkeys(s.subscription for s in self._subscribers))
+
+    def deliver(self, frames: dict[Subscription, Frame]) -> int:
+        """Offer each subscriber its subscription's frame of this step; returns the drops."""
+        if not frames:
             return 0
-        header = frame_header(sim, session_id=session_id, control_id=control_id)
-        cache: dict[Subscription, Frame] = {}
-        drops = 0
-        for s in targets:
-            sub = s.subscription
-            if sub not in cache:
-                cache[sub] = Frame.encode({**header, **build_payload(sim, sub)})
-            drops += s.slot.put(cache[sub])
+        with self._lock:
+            targets = [s for s in self._subscribers if s.subscription in frames]
+        drops = sum(s.slot.put(frames[s.subscription], notify=False) for s in targets)
+        if targets:  # one wake-up of the event loop for all of them, not one per client
+            targets[0].slot.loop.call_soon_threadsafe(wake_all, [s.slot for s in targets])
         return drops
+
+
+def wake_all(slots: list[FrameSlot]) -> None:
+    """Wake the senders of ``slots`` (event-loop thread)."""
+    for slot in slots:
+        slot.wake()
 
 
 def frame_header(sim: Any, *, session_id: str, control_id: int) -> dict[str, Any]:

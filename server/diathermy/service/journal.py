@@ -43,7 +43,7 @@ class Journal:
         self.torn = False  # the last read found a line cut short (rewrite before appending)
 
     def append(self, op: str, **data: Any) -> int:
-        """Write one entry and return its sequence number (engine thread, under the lock)."""
+        """Write one entry and return its sequence number (worker thread, under the lock)."""
         self.seq += 1
         line = json.dumps({"seq": self.seq, "op": op, **data}, separators=(",", ":")) + "\n"
         fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)

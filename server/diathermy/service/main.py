@@ -81,6 +81,7 @@ def create_app(settings: Settings | None = None, *, engine: EngineAdapter | None
                 if rec.driver is not None:
                     await rec.driver.stop()
             saved = await save_dirty(registry=state.registry)
+            await anyio.to_thread.run_sync(state.registry.close_all)
             log.info("stopped", extra={"saved_sessions": saved})
 
     app = FastAPI(

@@ -28,7 +28,10 @@ from pathlib import Path
 from typing import Any
 
 from diathermy.errors import CheckpointError
+from diathermy.scene import Scene
+from diathermy.service import engine_ops as ops
 from diathermy.service.engine import EngineAdapter
+from diathermy.service.engine_process import RemoteSim
 from diathermy.service.exceptions import SessionNotFoundError
 from diathermy.service.hub import StreamHub
 from diathermy.service.journal import Journal, checkpoint_seq, last_step, mark_checkpoint, replay
@@ -42,29 +45,12 @@ def _write_json_atomic(path: Path, data: dict[str, Any]) -> None:
     os.replace(tmp, path)
 
 
-def sim_meta(sim: Any) -> dict[str, Any]:
-    """What a listing needs without loading the simulation."""
-    g = sim.grid
-    return {
-        "scene_name": sim.scene.name,
-        "grid": {
-            "shape": list(g.shape),
-            "spacing_m": list(g.spacing_m) if g.is_uniform else None,
-            "axes_m": None if g.is_uniform else [a.tolist() for a in g.axes()],
-            "origin_m": list(g.origin_m),
-            "size_m": list(g.size_m),
-            "n_nodes": int(g.n_nodes),
-        },
-        "effects": list(sim.effects),
-        "dof_counts": {k: int(v) for k, v in sim.dof_counts().items()},
-        "step": int(sim.step_index),
-        "time_s": float(sim.time_s),
-    }
-
-
 def public_meta(rec: SessionRecord) -> dict[str, Any]:
-    """The metadata with the live simulation's step and time; never writes into ``rec.meta``."""
-    return {**rec.meta, **sim_meta(rec.sim)} if rec.sim is not None else dict(rec.meta)
+    """The metadata with the live simulation's step, time and DOF counts (no engine call)."""
+    if rec.sim is None:
+        return dict(rec.meta)
+    live = {"step": rec.sim.step_index, "time_s": rec.sim.time_s}
+    return {**rec.meta, **live, "dof_counts": rec.sim.dof_counts or rec.meta.get("dof_counts")}
 
 
 @dataclass(eq=False)
@@ -75,7 +61,7 @@ class SessionRecord:
     owner: str
     directory: Path
     meta: dict[str, Any]
-    sim: Any = None
+    sim: RemoteSim | None = None  # the engine process, once loaded
     lock: asyncio.Lock = field(default_factory=asyncio.Lock)
     hub: StreamHub = field(default_factory=StreamHub)
     control_id: int = 0
@@ -162,30 +148,47 @@ class SessionRegistry:
             raise SessionNotFoundError(f"no session {session_id!r}", field="session_id")
         return rec
 
-    def add(self, *, owner: str, sim: Any) -> SessionRecord:
-        """Register a new session around a built simulation and checkpoint it (engine thread)."""
+    def create(self, *, owner: str, scene: Scene) -> SessionRecord:
+        """Build a simulation of ``scene`` in a new engine process, register and checkpoint it
+        (worker thread)."""
         sid = uuid.uuid4().hex[:16]
-        directory = self.root / sid
-        (directory / "snapshots").mkdir(parents=True)
-        meta = {"id": sid, "owner": owner, "created_at": time.time(), "snapshots": []}
-        rec = SessionRecord(id=sid, owner=owner, directory=directory, meta=meta, sim=sim)
-        self.save(rec)
+        sim = RemoteSim(sid)
+        try:
+            sim.call(ops.create, self.engine, scene)
+            directory = self.root / sid
+            (directory / "snapshots").mkdir(parents=True)
+            meta = {"id": sid, "owner": owner, "created_at": time.time(), "snapshots": []}
+            rec = SessionRecord(id=sid, owner=owner, directory=directory, meta=meta, sim=sim)
+            self.save(rec)
+        except BaseException:
+            sim.close()
+            raise
         self.sessions[sid] = rec
         return rec
 
-    def load(self, rec: SessionRecord) -> Any:
-        """The session's simulation: its checkpoint plus the journal replayed (engine thread)."""
+    def load(self, rec: SessionRecord) -> RemoteSim:
+        """The session's engine: its checkpoint loaded in a new engine process and the journal
+        replayed there (worker thread, under the session lock). An engine process that ended is
+        replaced the same way."""
         if rec.deleted:
             raise SessionNotFoundError(f"session {rec.id} was deleted", field="session_id")
+        if rec.sim is not None and rec.sim.failed:
+            rec.sim.close()
+            rec.sim = None
         if rec.sim is None:
             t0 = time.perf_counter()
             seq, _, _ = checkpoint_seq(rec.state_path)
-            sim = self.engine.load(rec.state_path)
             journal = Journal(rec.journal_path, seq=seq, fsync=self.fsync)
             entries = journal.entries(after=seq)
+            sim = RemoteSim(rec.id)
+            try:
+                sim.call(ops.load, self.engine, rec.state_path)
+                steps = sim.call(replay, entries)
+            except BaseException:
+                sim.close()
+                raise
             if journal.torn:  # rewrite without the cut-short line before appending after it
                 journal.compact(seq)
-            steps = replay(sim, entries)
             journal.seq = max([seq, *(int(e["seq"]) for e in entries)])
             rec.sim, rec.journal = sim, journal
             rec.dirty = bool(entries)  # the next autosave folds the journal into a checkpoint
@@ -201,64 +204,76 @@ class SessionRegistry:
         return rec.sim
 
     def log_step(self, rec: SessionRecord) -> None:
-        """Journal the step just taken, before anything acknowledges it (engine thread)."""
-        assert rec.journal is not None
-        rec.journal.append("step", step=int(rec.sim.step_index), time_s=float(rec.sim.time_s))
+        """Journal the step just taken, before anything acknowledges it (worker thread)."""
+        assert rec.journal is not None and rec.sim is not None
+        rec.journal.append("step", step=rec.sim.step_index, time_s=rec.sim.time_s)
         rec.dirty = True
 
     def log_electrode(self, rec: SessionRecord, name: str, update: dict[str, Any]) -> None:
-        """Journal an electrode change just applied, before it is acknowledged (engine thread)."""
+        """Journal an electrode change just applied, before it is acknowledged (worker thread)."""
         assert rec.journal is not None
         rec.journal.append("electrode", name=name, update=update)
         rec.dirty = True
 
     def save(self, rec: SessionRecord) -> None:
-        """Checkpoint the session, then empty its journal (engine thread, under the session lock).
+        """Checkpoint the session, then empty its journal (worker thread, under the session lock).
 
         Order matters for a crash at any point: the checkpoint (marked with the journal's
         sequence number) replaces the old one atomically, then the metadata, then the journal is
         compacted; entries the new checkpoint already holds are skipped by their number.
         """
+        assert rec.sim is not None
         if rec.journal is None:
             rec.journal = Journal(rec.journal_path, fsync=self.fsync)
         seq = rec.journal.seq
         tmp = rec.state_path.with_suffix(".h5.tmp")
-        rec.sim.save_checkpoint(tmp)
+        rec.sim.call(ops.save_checkpoint, tmp)
         mark_checkpoint(tmp, seq)
         os.replace(tmp, rec.state_path)
-        rec.meta.update(sim_meta(rec.sim))
+        rec.meta.update(rec.sim.call(ops.sim_meta))
         rec.meta["saved_at"] = time.time()
         rec.write_meta()
         rec.journal.compact(seq)
         rec.dirty = False
 
     def snapshot(self, rec: SessionRecord) -> dict[str, Any]:
-        """Write a named snapshot of the current state (engine thread, under the session lock)."""
+        """Write a named snapshot of the current state (worker thread, under the session lock)."""
+        assert rec.sim is not None
         snap_id = uuid.uuid4().hex[:12]
         snap: dict[str, Any] = {
             "id": snap_id,
-            "step": int(rec.sim.step_index),
-            "time_s": float(rec.sim.time_s),
+            "step": rec.sim.step_index,
+            "time_s": rec.sim.time_s,
             "created_at": time.time(),
         }
-        rec.sim.save_checkpoint(rec.snapshot_path(snap_id))
+        rec.sim.call(ops.save_checkpoint, rec.snapshot_path(snap_id))
         rec.meta.setdefault("snapshots", []).append(snap)
         rec.write_meta()
         return snap
 
     def restore(self, rec: SessionRecord, snapshot_id: str) -> None:
-        """Replace the session's state by a snapshot's (engine thread, under the session lock)."""
+        """Replace the session's state by a snapshot's (worker thread, under the session lock)."""
         path = rec.snapshot_path(snapshot_id)
         if not path.exists():
             raise SessionNotFoundError(f"no snapshot {snapshot_id!r}", field="snapshot_id")
-        sim = self.engine.load(path)
-        if rec.sim is not None and tuple(sim.grid.shape) != tuple(rec.sim.grid.shape):
-            raise CheckpointError(f"snapshot {snapshot_id!r} does not match the session's grid")
-        rec.sim = sim
+        assert rec.sim is not None
+        rec.sim.call(ops.restore, self.engine, path, snapshot_id)
         self.save(rec)
 
     def remove(self, rec: SessionRecord) -> None:
-        """Forget a session and delete its files."""
+        """Forget a session, end its engine process and delete its files."""
         rec.deleted = True
         self.sessions.pop(rec.id, None)
+        self.unload(rec)
         shutil.rmtree(rec.directory, ignore_errors=True)
+
+    def close_all(self) -> None:
+        """End every engine process (shutdown, after the last checkpoints)."""
+        for rec in list(self.sessions.values()):
+            self.unload(rec)
+
+    def unload(self, rec: SessionRecord) -> None:
+        """End the session's engine process, if any (under the session lock, or at shutdown)."""
+        sim, rec.sim = rec.sim, None
+        if sim is not None:
+            sim.close()

@@ -1,7 +1,7 @@
 """What the session routes do, as keyword-only functions that return values (no HTTP here).
 
-Engine work runs in worker threads under the session's lock, so a long step never blocks the
-event loop or other sessions. A step or restore on a session that is busy raises
+Engine work runs in each session's engine process (``engine_process.py``), called from worker
+threads under the session's lock, so a long step never blocks the event loop or other sessions. A step or restore on a session that is busy raises
 ``SessionBusyError`` at once (HTTP 409); reads wait for the lock.
 """
 
@@ -9,9 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import tempfile
 from collections.abc import AsyncIterator, Callable
-from pathlib import Path
 from typing import Any, TypeVar
 
 import anyio.to_thread
@@ -19,10 +17,10 @@ import numpy as np
 
 from diathermy.errors import SceneError
 from diathermy.scene import builtin_scene, scene_from_dict
+from diathermy.service import engine_ops as ops
 from diathermy.service.config import Settings
+from diathermy.service.engine_process import RemoteSim
 from diathermy.service.exceptions import (
-    BadRequestError,
-    NotFoundError,
     SessionBusyError,
     SessionNotFoundError,
 )
@@ -112,11 +110,7 @@ async def create_session(
     check_grid(settings, scene.node_shape, scene.closed_effects)
     check_drive(scene)
 
-    def build() -> SessionRecord:
-        sim = registry.engine.create(scene)
-        return registry.add(owner=owner, sim=sim)
-
-    rec = await anyio.to_thread.run_sync(build)
+    rec = await anyio.to_thread.run_sync(lambda: registry.create(owner=owner, scene=scene))
     log.info("created session", extra={"session": rec.id, "scene": scene.name})
     return rec
 
@@ -140,15 +134,20 @@ def session_public(rec: SessionRecord) -> SessionPublic:
 
 
 def advance(
-    rec: SessionRecord, registry: SessionRegistry, sim: Any, n: int, metrics: ServiceMetrics
+    rec: SessionRecord,
+    registry: SessionRegistry,
+    sim: RemoteSim,
+    n: int,
+    metrics: ServiceMetrics,
 ) -> list[Any]:
-    """Take ``n`` steps, journalling then publishing each (engine thread, under the lock)."""
+    """Take ``n`` steps, journalling then publishing each (worker thread, under the lock)."""
     reports = []
     for _ in range(n):
-        rep = sim.step()
+        subs = rec.hub.subscriptions()
+        rep, frames = sim.call(ops.step_frames, subs, rec.id, rec.control_id)
         registry.log_step(rec)
         metrics.observe_report(rep)
-        drops = rec.hub.publish(sim, session_id=rec.id, control_id=rec.control_id)
+        drops = rec.hub.deliver(frames)
         if drops:
             metrics.frames_dropped.inc(drops)
         reports.append(rep)
@@ -175,17 +174,12 @@ async def update_electrode(
 ) -> tuple[int, int]:
     """Apply electrode changes before the next step; returns (new control id, step applied at)."""
 
-    def apply(sim: Any) -> tuple[int, int]:
-        names = [e.name for e in sim.scene.electrodes]
-        if name not in names:
-            raise NotFoundError(
-                f"unknown electrode {name!r}; electrodes: {', '.join(names)}", field="name"
-            )
+    def apply(sim: RemoteSim) -> tuple[int, int]:
         changes = update.model_dump(exclude_none=True)
-        sim.set_electrode(name, **changes)
+        step = sim.call(ops.set_electrode, name, changes)
         registry.log_electrode(rec, name, changes)
         rec.control_id += 1
-        return rec.control_id, int(sim.step_index)
+        return rec.control_id, step
 
     if rec.deleted:
         raise SessionNotFoundError(f"session {rec.id} was deleted", field="session_id")
@@ -196,35 +190,15 @@ async def update_electrode(
     return await run_locked(rec, registry, apply)
 
 
-def parse_field_names(text: str | None, available: list[str]) -> list[str]:
-    """``a,b,c`` -> names, each checked against the session's fields."""
-    names = [n.strip() for n in (text or "").split(",") if n.strip()]
-    if not names:
-        raise BadRequestError(
-            f"name at least one field; available: {', '.join(available)}", field="fields"
-        )
-    unknown = [n for n in names if n not in available]
-    if unknown:
-        raise BadRequestError(
-            f"unknown field(s) {', '.join(unknown)}; available: {', '.join(available)}",
-            field="fields",
-        )
-    return list(dict.fromkeys(names))
-
-
 async def read_fields(
     *, registry: SessionRegistry, rec: SessionRecord, fields: str | None, dtype: str
 ) -> tuple[int, float, dict[str, np.ndarray]]:
     """(step, time, arrays) of the named fields, floats cast to ``dtype``."""
 
-    def read(sim: Any) -> tuple[int, float, dict[str, np.ndarray]]:
-        names = parse_field_names(fields, list(sim.field_names()))
-        arrays = {n: np.asarray(sim.field(n)) for n in names}
-        with np.errstate(over="ignore"):
-            arrays = {n: a.astype(dtype) if a.dtype.kind == "f" else a for n, a in arrays.items()}
-        return int(sim.step_index), float(sim.time_s), arrays
-
-    return await run_locked(rec, registry, read)
+    result: tuple[int, float, dict[str, np.ndarray]] = await run_locked(
+        rec, registry, lambda sim: sim.call(ops.read_fields, fields, dtype)
+    )
+    return result
 
 
 async def read_surface(
@@ -232,28 +206,17 @@ async def read_surface(
 ) -> tuple[int, float, np.ndarray, np.ndarray]:
     """(step, time, vertices (n, 3) m, faces (m, 3)) of the cut surface."""
 
-    def read(sim: Any) -> tuple[int, float, np.ndarray, np.ndarray]:
-        verts, faces = sim.cut_surface()
-        return (
-            int(sim.step_index),
-            float(sim.time_s),
-            np.asarray(verts, dtype=float).reshape(-1, 3),
-            np.asarray(faces, dtype=np.int64).reshape(-1, 3),
-        )
-
-    return await run_locked(rec, registry, read)
+    result: tuple[int, float, np.ndarray, np.ndarray] = await run_locked(
+        rec, registry, lambda sim: sim.call(ops.read_surface)
+    )
+    return result
 
 
 async def vtu_bytes(*, registry: SessionRegistry, rec: SessionRecord) -> bytes:
     """The current state as a ParaView .vtu file."""
 
-    def write(sim: Any) -> bytes:
-        with tempfile.TemporaryDirectory() as tmp:
-            path = Path(tmp) / "state.vtu"
-            sim.write_vtu(path)
-            return path.read_bytes()
-
-    return await run_locked(rec, registry, write)
+    data: bytes = await run_locked(rec, registry, lambda sim: sim.call(ops.vtu_bytes))
+    return data
 
 
 async def take_snapshot(*, registry: SessionRegistry, rec: SessionRecord) -> SnapshotPublic:

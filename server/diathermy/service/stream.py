@@ -21,11 +21,13 @@ from starlette.websockets import WebSocket, WebSocketDisconnect, WebSocketState
 
 from diathermy.errors import DiathermyError
 from diathermy.scene.io import describe_validation_error
+from diathermy.service import engine_ops as ops
 from diathermy.service.driver import SessionDriver, driver_of
 from diathermy.service.encoding import pack, unpack
+from diathermy.service.engine_process import RemoteSim
 from diathermy.service.errors import classify
 from diathermy.service.exceptions import BadRequestError
-from diathermy.service.hub import Frame, FrameSlot, Subscriber, Subscription, current_frame
+from diathermy.service.hub import Frame, FrameSlot, Subscriber, Subscription
 from diathermy.service.messages import (
     ElectrodeControl,
     Pause,
@@ -117,7 +119,9 @@ class StreamConnection:
 
     async def serve(self) -> None:
         driver = driver_of(self.rec, self.state)
-        hello = await run_locked(self.rec, self.state.registry, self._hello)
+        hello = await run_locked(
+            self.rec, self.state.registry, lambda sim: sim.call(ops.hello, self.rec.id)
+        )
         await self.send(hello)
         driver.attach(self.sub, self)
         self.state.metrics.stream_clients.inc()
@@ -137,17 +141,6 @@ class StreamConnection:
         deadline = time.monotonic() + timeout_s
         while self.replies and not sender.done() and time.monotonic() < deadline:
             await asyncio.sleep(0.005)
-
-    def _hello(self, sim: Any) -> dict[str, Any]:
-        return {
-            "type": "hello",
-            "session": self.rec.id,
-            "step": int(sim.step_index),
-            "time_s": float(sim.time_s),
-            "fields": list(sim.field_names()),
-            "effects": list(sim.effects),
-            "electrodes": [e.name for e in sim.scene.electrodes],
-        }
 
     async def _receive_loop(self, driver: SessionDriver) -> None:
         limit = self.state.settings.max_message_bytes
@@ -193,7 +186,7 @@ class StreamConnection:
         self, of: str, driver: SessionDriver, tag: Any = None, step: int | None = None
     ) -> None:
         if step is None and self.rec.sim is not None:
-            step = int(self.rec.sim.step_index)
+            step = self.rec.sim.step_index
         await self.send(
             {
                 "type": "ack",
@@ -238,21 +231,10 @@ class StreamConnection:
             region=msg.region,
         )
 
-        def check_and_encode(sim: Any) -> Frame:
-            available = list(sim.field_names())
-            for i, name in enumerate(sub.fields):
-                if name not in available:
-                    raise BadRequestError(
-                        f"unknown field {name!r}; available: {', '.join(available)}",
-                        field=f"fields.{i}",
-                    )
-                if sub.region == "surface" and sim.field(name).ndim == 1:
-                    raise BadRequestError(
-                        f"{name!r} is per-element; the surface region carries nodal fields only",
-                        field=f"fields.{i}",
-                    )
+        def check_and_encode(sim: RemoteSim) -> Frame:
+            frame: Frame = sim.call(ops.subscribe_frame, sub, self.rec.id, self.rec.control_id)
             self.sub.subscription = sub
-            return current_frame(sim, sub, session_id=self.rec.id, control_id=self.rec.control_id)
+            return frame
 
         return await run_locked(self.rec, self.state.registry, check_and_encode)
 

@@ -86,8 +86,8 @@ async def step_session(rec: SessionDep, state: StateDep, body: StepRequest | Non
         registry=state.registry, settings=state.settings, metrics=state.metrics, rec=rec, n=n
     )
     return StepResult(
-        step=int(rec.sim.step_index),
-        time_s=float(rec.sim.time_s),
+        step=int(reports[-1].step),  # n >= 1: the state after the last step taken
+        time_s=float(reports[-1].time_s),
         reports=[finite(r.to_dict()) for r in reports],
     )
 

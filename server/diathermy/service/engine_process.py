@@ -1,0 +1,185 @@
+"""Each loaded session's engine runs in a process of its own, so that stepping never holds the
+server's GIL: the event loop writes frames to sockets while the engine steps on another core.
+
+The server holds one ``RemoteSim`` per loaded session: a pipe to its engine process (forked by a
+forkserver that has imported the engine once) and what the server reads without asking (step,
+time, the last step report, DOF counts), refreshed by every call. ``call(op, *args)`` runs
+``op(sim, *args)`` in the engine process (``op`` is a module-level function, ``engine_ops.py``)
+and returns its value or raises its exception; an op that returns ``Replace`` swaps the process's
+simulation (create, load, restore). One call at a time: callers hold the session lock.
+
+An engine process ends when the server closes the pipe (DELETE, shutdown), when the server dies
+(the kernel closes the server's end; mid-step, the parent watch notices that the forkserver,
+which leaves with the server, is gone), never on Ctrl-C (the server saves through it first). One
+that dies raises ``EngineProcessError``; the session reloads from its checkpoint and journal on
+next use.
+"""
+
+from __future__ import annotations
+
+import functools
+import multiprocessing
+import os
+import signal
+import socket
+import threading
+import time
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from multiprocessing.context import BaseContext
+from typing import Any
+
+from diathermy.service.exceptions import EngineProcessError
+
+PRELOAD = ["diathermy.service.engine_ops"]
+"""Imported once by the forkserver, so that a new engine process starts in milliseconds."""
+
+
+@dataclass(frozen=True)
+class Replace:
+    """An op's result that makes ``sim`` the engine process's simulation; ``value`` is returned."""
+
+    sim: Any
+    value: Any = None
+
+
+@dataclass(frozen=True)
+class SimStatus:
+    """What the server reads without a call: step, time s, last step report, DOF counts."""
+
+    step: int
+    time_s: float
+    report: Any  # engine.report.StepReport | None
+    dof_counts: dict[str, int]
+
+
+@functools.cache
+def _context() -> BaseContext:
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(PRELOAD)
+    return ctx
+
+
+class RemoteSim:
+    """The server's handle on one engine process (see the module docstring)."""
+
+    def __init__(self, label: str) -> None:
+        self.label = label
+        ctx = _context()
+        self._conn, child = ctx.Pipe()  # a socket pair
+        _widen(self._conn)
+        self._proc = ctx.Process(  # type: ignore[attr-defined]
+            target=serve, args=(child,), name=f"diathermy-engine-{label}", daemon=True
+        )
+        self._proc.start()
+        child.close()
+        self._lock = threading.Lock()
+        self.failed = False
+        self.step_index = 0
+        self.time_s = 0.0
+        self.last_report: Any = None  # engine.report.StepReport | None
+        self.dof_counts: dict[str, int] = {}
+
+    @property
+    def pid(self) -> int | None:
+        return self._proc.pid
+
+    def call(self, op: Callable[..., Any], *args: Any) -> Any:
+        """``op(sim, *args)`` in the engine process; its exceptions are raised here."""
+        with self._lock:
+            if self.failed:
+                raise self._gone()
+            try:
+                self._conn.send((op, args))
+                reply = self._conn.recv()
+            except (EOFError, OSError):
+                self.failed = True
+                self._proc.join(timeout=2.0)
+                raise self._gone() from None
+        kind, value, status = reply
+        if status is not None:
+            self.step_index, self.time_s = status.step, status.time_s
+            self.last_report, self.dof_counts = status.report, status.dof_counts
+        if kind == "err":
+            raise value
+        return value
+
+    def _gone(self) -> EngineProcessError:
+        code = self._proc.exitcode
+        how = f"signal {-code}" if code is not None and code < 0 else f"exit code {code}"
+        return EngineProcessError(
+            f"the engine process of session {self.label} ended ({how}); the session is "
+            "reloaded from its checkpoint and journal on next use"
+        )
+
+    def close(self, timeout_s: float = 10.0) -> None:
+        """End the engine process: ask, then wait, then kill (caller holds the session lock)."""
+        with self._lock:
+            self.failed = True
+            try:
+                self._conn.send((None, ()))
+            except OSError:
+                pass
+            self._conn.close()
+            self._proc.join(timeout=timeout_s)
+            if self._proc.exitcode is None:
+                self._proc.kill()
+                self._proc.join()
+
+
+def _widen(conn: Connection, size: int = 4 << 20) -> None:
+    """A socket send buffer that takes a whole frame of a large grid (MBs) in one write, so that
+    the engine is not woken once per 200 kB while the server reads it (capped by wmem_max)."""
+    with socket.socket(fileno=os.dup(conn.fileno())) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, size)
+
+
+def _watch_parent(parent: int, period_s: float = 0.2) -> None:
+    while os.getppid() == parent:
+        time.sleep(period_s)
+    os._exit(1)  # the forkserver left, so the server did: stop even in the middle of a step
+
+
+def _status(sim: Any) -> SimStatus | None:
+    if sim is None:
+        return None
+    return SimStatus(
+        step=int(sim.step_index),
+        time_s=float(sim.time_s),
+        report=sim.last_report,
+        dof_counts={k: int(v) for k, v in sim.dof_counts().items()},
+    )
+
+
+def serve(conn: Connection) -> None:
+    """The engine process: run ops on its simulation until the pipe closes or says stop."""
+    from diathermy.runtime import configure_threads
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the server, which saves via us
+    configure_threads()
+    _widen(conn)
+    threading.Thread(target=_watch_parent, args=(os.getppid(),), daemon=True).start()
+    sim: Any = None
+    while True:
+        try:
+            op, args = conn.recv()
+        except (EOFError, OSError):
+            return
+        if op is None:
+            return
+        try:
+            result = op(sim, *args)
+            if isinstance(result, Replace):
+                sim, result = result.sim, result.value
+            reply: tuple[str, Any, SimStatus | None] = ("ok", result, _status(sim))
+        except Exception as err:
+            reply = ("err", err, _status(sim))
+        try:
+            conn.send(reply)
+        except OSError:
+            return
+        except Exception:  # the value or the error could not be pickled
+            text = traceback.format_exc(limit=3)
+            conn.send(("err", RuntimeError(f"engine reply not sendable: {text}"), _status(sim)))

@@ -1,0 +1,67 @@
+"""The process boundary: each loaded session's engine runs in a process of its own. One that dies
+is an error the client sees at once (not a hang) and the session carries on from its journal;
+DELETE and shutdown end the processes."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+from pathlib import Path
+
+import httpx
+
+from diathermy.service.engine import DefaultEngine
+from tests.service.conftest import SMALL, LiveServer, assert_ended, make_settings, running
+from tests.service.test_stream import open_stream, recv_type
+
+
+def engine_pid(live: LiveServer, sid: str) -> int:
+    sim = live.state.registry.sessions[sid].sim
+    assert sim is not None and sim.pid is not None and sim.pid != os.getpid()
+    return int(sim.pid)
+
+
+def test_a_dead_engine_is_a_clear_error_then_the_session_reloads(
+    live: LiveServer, api: httpx.Client
+) -> None:
+    sid = api.post("/v1/sessions", json=SMALL).json()["id"]
+    assert api.post(f"/v1/sessions/{sid}/step", json={"n": 3}).json()["step"] == 3
+    pid = engine_pid(live, sid)
+    os.kill(pid, signal.SIGKILL)
+    assert_ended([pid])
+    r = api.post(f"/v1/sessions/{sid}/step")
+    assert r.status_code == 503, r.text
+    body = r.json()
+    assert body["error"] == "engine_failed" and "signal 9" in body["message"], body
+    r = api.post(f"/v1/sessions/{sid}/step")  # a new engine process, replayed from the journal
+    assert r.status_code == 200 and r.json()["step"] == 4, r.text
+    assert engine_pid(live, sid) != pid
+
+
+def test_a_dead_engine_stops_the_stream_with_an_error(live: LiveServer, api: httpx.Client) -> None:
+    sid = api.post("/v1/sessions", json=SMALL).json()["id"]
+    with open_stream(live, sid) as ws:
+        recv_type(ws, "hello")
+        ws.send(json.dumps({"type": "subscribe", "fields": ["temperature"]}))
+        ws.send(json.dumps({"type": "run", "rate_hz": 50}))
+        recv_type(ws, "frame")
+        os.kill(engine_pid(live, sid), signal.SIGKILL)
+        err = recv_type(ws, "error", timeout=10)
+        assert err["error"] == "engine_failed", err
+        ws.send(json.dumps({"type": "run", "rate_hz": 50}))  # resumes on a reloaded engine
+        step = recv_type(ws, "frame", timeout=10)["step"]
+        assert recv_type(ws, "frame", timeout=10)["step"] > step
+
+
+def test_delete_and_shutdown_end_the_engine_processes(tmp_path: Path) -> None:
+    live = LiveServer(make_settings(tmp_path / "data"), DefaultEngine()).start()
+    try:
+        with live.client() as api:
+            a, b = (api.post("/v1/sessions", json=SMALL).json()["id"] for _ in range(2))
+            pid_a, pid_b = engine_pid(live, a), engine_pid(live, b)
+            assert api.delete(f"/v1/sessions/{a}").status_code == 204
+            assert not running(pid_a) and running(pid_b)
+    finally:
+        live.stop()
+    assert not running(pid_b)
