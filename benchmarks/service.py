@@ -433,9 +433,9 @@ def write_report(
         "row is the median of the repetitions; the configurations run interleaved (alone, 1, 4, "
         "16, alone, ...) on fresh sessions, and *vs alone* is the median of each run's ratio to "
         "the alone run just before it, so that the shared machine's drifting load cancels. "
-        "CPU: cores used by the server process and by the benchmark's client process during "
-        "the row (the clients decode every frame in Python and share the cores with the "
-        "server). Latency: from sending an "
+        "CPU: cores used during the row by the server process, by its engine processes and by "
+        "the benchmark's client process (the clients decode every frame in Python and share the "
+        "cores with the server). Latency: from sending an "
         "electrode control message to the first frame whose `control_id` shows it applied; "
         "every client sends one every 0.25 s. Frames dropped: coalesced for clients that fell "
         "behind (summed). Targets: frames/s per client >= 0.9 x steps/s, steps/s with 16 "
@@ -452,21 +452,24 @@ def write_report(
     for grid, alone, fan in tables:
         lines += fan_table(grid, alone, fan)
     lines += [
-        "How: the engine steps in a worker thread that keeps stepping until something else "
-        "needs the session (electrode controls are applied between two of its steps); after "
-        "each step the frame is built and msgpack-encoded there once per distinct subscription, "
-        "and the event loop only prefixes each client's `dropped` counter and writes the bytes "
-        "(no per-message compression: float fields barely compress and deflating a frame per "
-        "client cost more than the step). Every step is journalled before its frame goes out "
-        "(`journal.py`).",
+        "How: each loaded session's engine runs in a process of its own "
+        "(`engine_process.py`, forked by a forkserver that imported the engine once); a worker "
+        "thread of the server asks it for one step at a time and applies electrode controls "
+        "between two steps. The engine process takes the step and builds and msgpack-encodes "
+        "the frame once per distinct subscription; the server journals the step "
+        "(`journal.py`) before it hands the bytes to the clients, and the event loop only "
+        "prefixes each client's `dropped` counter and writes the bytes (no per-message "
+        "compression: float fields barely compress and deflating a frame per client cost more "
+        "than the step). So the sockets' writes no longer take GIL time from the engine, and "
+        "with BLAS on one thread (`DIATHERMY_BLAS_THREADS`, default 1, as `diathermy serve` "
+        "sets) the engine takes one core and leaves the other to the event loop, the kernel's "
+        "copies and the clients.",
         "",
-        "Reading the 16-client rows: every step moves 16 x the frame over loopback (150 kB "
-        "on 17x17x33, 1.2 MB on 33x33x65). On 2 cores shared with other jobs, the kernel's "
-        "copies, the clients' reads and the event loop's writes take CPU (and GIL) time from "
-        "the engine thread: the server process gets less than one core (CPU column) and each "
-        "step takes longer, while frames per client keep up with the steps. A profile "
-        "(py-spy, 16 clients, 17x17x33) showed the engine thread busy 97 % of the time and "
-        "the event loop 26 %, mostly in the socket write.",
+        "CPU column: *server* is the server process (event loop, HTTP, journal), *engine* its "
+        "engine processes, *clients* the benchmark's client process. Every step moves 16 x the "
+        "frame over loopback (150 kB on 17x17x33, 1.2 MB on 33x33x65), which the clients decode "
+        "in Python: on 2 cores shared with other jobs the clients fall behind first (frames "
+        "dropped, latency queued in the sockets).",
         "",
         "## Bytes per frame",
         "",

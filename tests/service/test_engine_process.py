@@ -65,3 +65,25 @@ def test_delete_and_shutdown_end_the_engine_processes(tmp_path: Path) -> None:
     finally:
         live.stop()
     assert not running(pid_b)
+
+
+def test_shutdown_with_a_dead_engine_keeps_the_session(tmp_path: Path) -> None:
+    settings = make_settings(tmp_path / "data")
+    live = LiveServer(settings, DefaultEngine()).start()
+    try:
+        with live.client() as api:
+            sid = api.post("/v1/sessions", json=SMALL).json()["id"]
+            assert api.post(f"/v1/sessions/{sid}/step", json={"n": 3}).status_code == 200
+            pid = engine_pid(live, sid)
+            os.kill(pid, signal.SIGKILL)
+            assert_ended([pid])
+    finally:
+        live.stop()  # its checkpoint fails; the journal has the steps
+    again = LiveServer(settings, DefaultEngine()).start()
+    try:
+        with again.client() as api:
+            assert api.get(f"/v1/sessions/{sid}").json()["step"] == 3
+            r = api.post(f"/v1/sessions/{sid}/step")
+            assert r.status_code == 200 and r.json()["step"] == 4, r.text
+    finally:
+        again.stop()

@@ -9,6 +9,7 @@ import sys
 import time
 from collections import Counter
 from collections.abc import Callable, Iterator
+from operator import attrgetter
 from pathlib import Path
 
 import httpx
@@ -103,8 +104,9 @@ def test_dataset_then_training_to_an_active_model(
     assert session.status_code == 201, session.text
     stepped = api.post(f"/v1/sessions/{session.json()['id']}/step", json={"n": 2})
     assert stepped.status_code == 200, stepped.text
-    sim = live.state.registry.sessions[session.json()["id"]].sim
-    assert sim.mechanics.name == "cnn" and sim.mechanics.model_path == path
+    sim = live.state.registry.sessions[session.json()["id"]].sim  # the engine process's
+    backend = sim.call(attrgetter("mechanics.name", "mechanics.model_path"))
+    assert backend == ("cnn", path)
 
     # another token sees none of these jobs
     with live.client(TOKEN_B) as other:

@@ -62,7 +62,7 @@ def create_app(settings: Settings | None = None, *, engine: EngineAdapter | None
     sessions_ = state.registry.sessions
     state.metrics.sessions.set_function(lambda: len(sessions_))
     state.metrics.sessions_loaded.set_function(
-        lambda: sum(r.sim is not None for r in list(sessions_.values()))
+        lambda: sum(r.sim is not None and not r.sim.failed for r in list(sessions_.values()))
     )
 
     @contextlib.asynccontextmanager
@@ -80,8 +80,10 @@ def create_app(settings: Settings | None = None, *, engine: EngineAdapter | None
             for rec in list(state.registry.sessions.values()):
                 if rec.driver is not None:
                     await rec.driver.stop()
-            saved = await save_dirty(registry=state.registry)
-            await anyio.to_thread.run_sync(state.registry.close_all)
+            try:
+                saved = await save_dirty(registry=state.registry)
+            finally:
+                await anyio.to_thread.run_sync(state.registry.close_all)
             log.info("stopped", extra={"saved_sessions": saved})
 
     app = FastAPI(

@@ -21,6 +21,7 @@ from diathermy.service import engine_ops as ops
 from diathermy.service.config import Settings
 from diathermy.service.engine_process import RemoteSim
 from diathermy.service.exceptions import (
+    EngineProcessError,
     SessionBusyError,
     SessionNotFoundError,
 )
@@ -250,10 +251,14 @@ async def save_dirty(*, registry: SessionRegistry) -> int:
     streamed: the stepping batch yields the lock after the step in progress)."""
     saved = 0
     for rec in list(registry.sessions.values()):
-        if rec.sim is None or not rec.dirty:
-            continue
+        if rec.sim is None or rec.sim.failed or not rec.dirty:
+            continue  # a dead engine's session is on disk already: checkpoint plus journal
         async with session_lock(rec):
             if rec.id in registry.sessions and not rec.deleted:
-                await anyio.to_thread.run_sync(registry.save, rec)
+                try:
+                    await anyio.to_thread.run_sync(registry.save, rec)
+                except EngineProcessError as err:  # nothing lost: the journal holds its steps
+                    log.warning("not checkpointed", extra={"session": rec.id, "reason": str(err)})
+                    continue
                 saved += 1
     return saved
