@@ -14,7 +14,9 @@ from diathermy.scene import Scene
 
 
 class EngineAdapter(Protocol):
-    """Where simulations come from; the default is ``diathermy.engine.simulation.Simulation``."""
+    """Where simulations come from; the default is ``diathermy.engine.simulation.Simulation``.
+
+    It is pickled into each session's engine process and called there (``engine_ops.py``)."""
 
     def create(self, scene: Scene) -> Any: ...
 
