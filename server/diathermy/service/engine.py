@@ -27,10 +27,12 @@ class DefaultEngine:
     """The real engine, imported on first use so that the app starts fast.
 
     ``data_dir``: the server's data directory, whose model registry resolves surrogate model
-    names (None: model files and the shipped models only)."""
+    names (None: model files and the shipped models only). ``DIATHERMY_ACCURACY_REPORT`` is read
+    here, in the server, not in the engine processes (whose environment is the forkserver's)."""
 
     def __init__(self, data_dir: Path | None = None) -> None:
         self.data_dir = data_dir
+        self.accuracy_report = os.environ.get("DIATHERMY_ACCURACY_REPORT")
 
     def _models(self) -> Any:
         if self.data_dir is None:
@@ -43,8 +45,8 @@ class DefaultEngine:
         from diathermy.engine.simulation import Simulation
         from diathermy.report.budget import resolve_accuracy_budget
 
-        report = os.environ.get("DIATHERMY_ACCURACY_REPORT")
-        return Simulation(resolve_accuracy_budget(scene, report), models=self._models())
+        budgeted = resolve_accuracy_budget(scene, self.accuracy_report)
+        return Simulation(budgeted, models=self._models())
 
     def load(self, path: Path) -> Any:
         from diathermy.engine.simulation import Simulation
