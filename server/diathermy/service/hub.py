@@ -67,6 +67,7 @@ class Frame:
     step: int
     n: int
     body: bytes
+    _last: list[tuple[int, bytes]] = field(default_factory=list, compare=False, repr=False)
 
     @classmethod
     def encode(cls, message: dict[str, Any]) -> Frame:
@@ -74,8 +75,16 @@ class Frame:
         return cls(step=int(message["step"]), n=len(message), body=body)
 
     def to_bytes(self, dropped: int) -> bytes:
-        """The whole msgpack map: the shared pairs plus this client's ``dropped``."""
-        return _map_header(self.n + 1) + pack("dropped") + pack(dropped) + self.body
+        """The whole msgpack map: the shared pairs plus this client's ``dropped``.
+
+        Clients that keep up share one ``dropped`` count (mostly 0), so the last message built is
+        kept and handed to the next client with the same count: one copy of the frame per step,
+        not one per client (event-loop thread only)."""
+        if self._last and self._last[0][0] == dropped:
+            return self._last[0][1]
+        data = _map_header(self.n + 1) + pack("dropped") + pack(dropped) + self.body
+        self._last[:] = [(dropped, data)]
+        return data
 
 
 class FrameSlot:
