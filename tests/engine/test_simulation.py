@@ -104,6 +104,8 @@ def test_cut_happens_and_electrode_follows_crater():
 def test_checkpoint_restore_continues_bit_for_bit(tmp_path):
     sim = Simulation(tiny_scene())
     sim.run(18)  # past boiling and into the cut
+    # both AMG hierarchies are kept from before the cut: the restore must rebuild those
+    assert sim.ctx.mechanics.krylov.stale and sim.ctx.potential.solver.krylov.stale
     sim.set_electrode("active", power_w=25.0)
     path = sim.save_checkpoint(tmp_path / "c.h5")
     sim.run(8)

@@ -3,8 +3,10 @@
 What is saved is what the next step reads: every field, the clock, the energy ledger, the
 electrode overrides, the level-set re-initialisation counter, and the solver state that decides
 the next iterates bit for bit (the cached unit-current potential and the Krylov warm start). AMG
-hierarchies are not saved: the engine rebuilds them from the current operators, as the original
-run does whenever an operator changes, so a restored run repeats the original exactly.
+hierarchies are not saved but where they come from: the potential's and the FEM mechanics' are
+kept across operator changes while they pay, so the checkpoint holds the conductivity and the
+Young's modulus each was built for, with its reuse counters; a restore rebuilds them from those,
+and a restored run repeats the original exactly.
 """
 
 from __future__ import annotations
@@ -25,8 +27,10 @@ from diathermy.engine.electrodes import ElectrodeOverride
 from diathermy.engine.ledger import EnergyLedger
 from diathermy.engine.state import SimulationState
 from diathermy.errors import CheckpointError, MeshError
+from diathermy.fem.solvers import ReuseState
 from diathermy.mesh.grid_attrs import grid_attrs, grid_from_attrs
 from diathermy.physics.electric import contact_weights
+from diathermy.physics.mechanics_backend import FEMBackend, HierarchyOrigin
 from diathermy.physics.topology import evaluate_topology
 from diathermy.scene import Scene
 from diathermy.version import __version__
@@ -163,7 +167,50 @@ def solver_state(ctx: EngineContext) -> dict[str, np.ndarray]:
             out["potential_contact_key"] = np.asarray(key)
             # the conductivity V1 was solved with: the cut may have changed it since
             out["potential_sigma"] = np.asarray(ctx.potential.solver.sigma)
+    out.update(_hierarchy_state(ctx))
     return out
+
+
+def _hierarchy_state(ctx: EngineContext) -> dict[str, np.ndarray]:
+    """The operators the kept AMG hierarchies were built for, and their reuse counters."""
+    out: dict[str, np.ndarray] = {}
+    solver = ctx.potential.solver
+    if solver.hierarchy_sigma is not None:
+        out["potential_hierarchy_sigma"] = np.asarray(solver.hierarchy_sigma)
+        out["potential_hierarchy_reuse"] = _reuse_array(solver.krylov.reuse)
+        out["potential_operator_sigma"] = np.asarray(solver.sigma)
+    backend = ctx.built_mechanics
+    origin = backend.hierarchy_origin if isinstance(backend, FEMBackend) else None
+    if origin is not None:
+        out["mechanics_hierarchy_E"] = origin.youngs_modulus_pa
+        out["mechanics_hierarchy_healthy"] = origin.healthy
+        out["mechanics_hierarchy_reuse"] = _reuse_array(origin.reuse)
+    return out
+
+
+def _reuse_array(r: ReuseState) -> np.ndarray:
+    return np.array([r.fresh_rate, r.stale_solves, float(r.rebuild_due)])
+
+
+def _reuse_state(a: np.ndarray) -> ReuseState:
+    return ReuseState(float(a[0]), int(a[1]), bool(a[2]))
+
+
+def _restore_hierarchies(ctx: EngineContext, solver: dict[str, np.ndarray]) -> None:
+    """Rebuild the kept hierarchies from the operators a checkpoint says they were built for."""
+    if "potential_hierarchy_sigma" in solver:
+        ctx.potential.solver.restore_hierarchy(
+            solver["potential_hierarchy_sigma"], _reuse_state(solver["potential_hierarchy_reuse"])
+        )
+        ctx.potential.solver.set_conductivity(solver["potential_operator_sigma"])
+    if "mechanics_hierarchy_E" in solver and isinstance(ctx.mechanics, FEMBackend):
+        ctx.mechanics.restore_hierarchy(
+            HierarchyOrigin(
+                solver["mechanics_hierarchy_E"],
+                solver["mechanics_hierarchy_healthy"].astype(bool),
+                _reuse_state(solver["mechanics_hierarchy_reuse"]),
+            )
+        )
 
 
 def restore_solver_state(
@@ -183,6 +230,7 @@ def restore_solver_state(
             state["level_set"], ctx.disc.mesh, ctx.disc.geom.volumes
         )
     memory.mechanics_key = load_key(state) if mechanics_current else None
+    _restore_hierarchies(ctx, solver)
     if "potential_warm_start" in solver:
         ctx.potential.solver.krylov.warm_start = solver["potential_warm_start"]
     if "potential_unit_V" in solver:

@@ -20,6 +20,12 @@ from diathermy.physics.thermal import HeatStepper
 from diathermy.physics.tissue_effects import ArrheniusDamage, ConductivityLaw
 from diathermy.scene import Scene
 
+POTENTIAL_STALE_FACTOR = 2.0
+"""Keep the potential's AMG hierarchy until CG converges 2x slower per iteration than after its
+build (benchmarks/results/realtime.md)..."""
+POTENTIAL_MAX_STALE_SOLVES = 100
+"""...and for at most this many solves with an outdated hierarchy."""
+
 
 class EngineContext:
     """The fixed part of a simulation of ``scene``; ``mechanics_factory`` builds the mechanics
@@ -36,8 +42,15 @@ class EngineContext:
         self.top_z = float(self.disc.grid.origin_m[2] + self.disc.grid.size_m[2])
         stiffness = edge_stiffness(geom, mesh.tets, mesh.n_nodes)
         self.potential = DrivenPotential(
-            # hierarchies rebuilt from the current operator: a restored run repeats the original
-            PotentialSolver(mesh, stiffness, rtol=scene.solver.electric_rtol, stale_factor=0.0)
+            # a cut or desiccation changes sigma on a few tets: the AMG hierarchy is kept while
+            # it pays; checkpoints save the sigma it was built for, so restarts stay bitwise
+            PotentialSolver(
+                mesh,
+                stiffness,
+                rtol=scene.solver.electric_rtol,
+                stale_factor=POTENTIAL_STALE_FACTOR,
+                max_stale_solves=POTENTIAL_MAX_STALE_SOLVES,
+            )
         )
         self.heat = HeatStepper(
             heat_mesh(mesh, geom, stiffness),
@@ -66,6 +79,11 @@ class EngineContext:
     @mechanics.setter
     def mechanics(self, backend: MechanicsBackend) -> None:
         self._mechanics = backend
+
+    @property
+    def built_mechanics(self) -> MechanicsBackend | None:
+        """The mechanics backend if it was built already (None: not yet used)."""
+        return self._mechanics
 
     @cached_property
     def incidence(self) -> sp.csr_matrix:

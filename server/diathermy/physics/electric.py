@@ -30,7 +30,7 @@ import scipy.sparse as sp
 from diathermy.errors import SceneError, SolverDivergedError
 from diathermy.fem.edges import EdgeStiffness, LaplacianPattern, laplacian_pattern
 from diathermy.fem.multigrid import SCALAR_AMG_OPTIONS, scaled_candidates, unit_diagonal
-from diathermy.fem.solvers import KrylovSolver, SolveStats
+from diathermy.fem.solvers import KrylovSolver, ReuseState, SolveStats
 from diathermy.mesh import TetMesh
 
 
@@ -153,6 +153,8 @@ class PotentialSolver:
         stiffness: its edge couplings (``diathermy.fem.edges.edge_stiffness``).
         dirichlet_nodes: nodes with prescribed V (default: the bottom side z-).
         rtol: relative residual of the CG solve.
+        stale_factor, max_stale_solves: when a conductivity change keeps the AMG hierarchy of
+            an older one (``KrylovSolver``); a checkpoint saves its origin (``hierarchy_sigma``).
     """
 
     def __init__(
@@ -164,6 +166,7 @@ class PotentialSolver:
         rtol: float = 1e-8,
         amg_options: dict[str, Any] | None = None,
         stale_factor: float = 1.5,
+        max_stale_solves: int = 0,
     ) -> None:
         fixed = mesh.side_nodes("z-") if dirichlet_nodes is None else np.unique(dirichlet_nodes)
         free = np.setdiff1d(np.arange(mesh.n_nodes), fixed)
@@ -174,10 +177,14 @@ class PotentialSolver:
         opts = SCALAR_AMG_OPTIONS if amg_options is None else amg_options
         # a cut changes sigma locally: the old hierarchy stays a good preconditioner (measured at
         # 33x33x65: 13 -> 14..19 iterations as a trench deepens, against a 2x-solve setup)
-        # (stale_factor 0 rebuilds on every change, so a restarted run repeats the original)
         self.krylov = KrylovSolver(
-            "potential", rtol=rtol, amg_options=opts, stale_factor=stale_factor
+            "potential",
+            rtol=rtol,
+            amg_options=opts,
+            stale_factor=stale_factor,
+            max_stale_solves=max_stale_solves,
         )
+        self.hierarchy_sigma: np.ndarray | None = None  # the conductivity the AMG was built for
         self.sigma: np.ndarray | None = None
         self.weights: np.ndarray | None = None
         self.matrix: sp.csr_matrix | None = None  # K on the free nodes, unscaled
@@ -219,10 +226,20 @@ class PotentialSolver:
             V[self.fixed] = dirichlet_values
             b -= self._lift(V)
         y, st = self.krylov.solve(self._scale * b)
+        if st.rebuilt:
+            self.hierarchy_sigma = self.sigma
         V[self.free] = self._scale * y
         stats = _stats(st, self._pending_assembly_s, reassembled=self._pending_assembly_s > 0)
         self._pending_assembly_s = 0.0
         return V, stats
+
+    def restore_hierarchy(self, sigma: np.ndarray, reuse: ReuseState) -> None:
+        """Rebuild the AMG hierarchy of conductivity sigma (n_tets,) S/m with its reuse counters
+        (as a checkpoint saved them), so the next solves repeat the original run's."""
+        self.set_conductivity(sigma)
+        self.krylov.build()
+        self.krylov.reuse = reuse
+        self.hierarchy_sigma = self.sigma
 
     def _lift(self, V: np.ndarray) -> np.ndarray:
         """K_fD V_D on the free nodes: what the prescribed values push into the free rows."""
@@ -286,6 +303,7 @@ class DrivenPotential:
     ) -> None:
         """Seed the cache (e.g. from a checkpoint); the conductivity must already be set."""
         self._contact, self._unit = contact, unit
+        self._version = self.solver.version
 
     def unit_field(
         self, sigma: np.ndarray | float, contact: ContactWeights

@@ -12,10 +12,17 @@ from typing import Any, Protocol
 import numpy as np
 
 from diathermy.fem.elastic import ElasticAssembler
+from diathermy.fem.solvers import KrylovSolver, ReuseState
 from diathermy.mesh import TetMesh
 from diathermy.physics.materials import Tissue, ersatz_youngs_modulus
-from diathermy.physics.mechanics import MechanicsSolver, mechanics_assembler
+from diathermy.physics.mechanics import DEFAULT_AMG_OPTIONS, MechanicsSolver, mechanics_assembler
 from diathermy.physics.strain_energy import strain_energy_density
+
+MECHANICS_STALE_FACTOR = 2.0
+"""Keep the AMG hierarchy of an earlier topology until CG converges 2x slower per iteration
+than right after its build (benchmarks/results/realtime.md: a cut of a few tets per step)."""
+MECHANICS_MAX_STALE_SOLVES = 100
+"""...and rebuild it after at most this many solves with an outdated hierarchy."""
 
 
 @dataclass(frozen=True)
@@ -46,8 +53,21 @@ class MechanicsBackend(Protocol):
     ) -> MechanicsOutput: ...
 
 
+@dataclass(frozen=True)
+class HierarchyOrigin:
+    """The topology the mechanics AMG hierarchy was built for: E per tet (Pa) and the healthy
+    mask of that solve (loose fragments removed), with the reuse counters since; a checkpoint
+    saves it so that a restored run rebuilds the very same preconditioner."""
+
+    youngs_modulus_pa: np.ndarray
+    healthy: np.ndarray
+    reuse: ReuseState
+
+
 class FEMBackend:
-    """The high-fidelity elastostatic FEM solve; the operator is rebuilt only when E changes."""
+    """The high-fidelity elastostatic FEM solve; the operator is rebuilt only when E changes, and
+    its AMG hierarchy is kept across topologies while it pays (``stale_factor``, 0: rebuild
+    with every new E)."""
 
     name = "fem"
 
@@ -60,6 +80,8 @@ class FEMBackend:
         rtol: float,
         ersatz_ratio: float,
         assembler: ElasticAssembler | None = None,
+        stale_factor: float = MECHANICS_STALE_FACTOR,
+        max_stale_solves: int = MECHANICS_MAX_STALE_SOLVES,
     ) -> None:
         self.mesh = mesh
         self.poisson_ratio = poisson_ratio
@@ -69,8 +91,37 @@ class FEMBackend:
         self._assembler = assembler
         self._solver: MechanicsSolver | None = None
         self._E: np.ndarray | None = None
+        self._krylov = KrylovSolver(
+            "elasticity",
+            rtol=rtol,
+            maxiter=500,
+            amg_options=DEFAULT_AMG_OPTIONS,
+            stale_factor=stale_factor,
+            max_stale_solves=max_stale_solves,
+        )
+        self._origin: tuple[np.ndarray, np.ndarray] | None = None
         self.n_builds = 0
         self.n_solves = 0
+
+    @property
+    def hierarchy_origin(self) -> HierarchyOrigin | None:
+        """Where the current AMG hierarchy comes from (None before the first solve)."""
+        if self._origin is None:
+            return None
+        return HierarchyOrigin(*self._origin, reuse=self._krylov.reuse)
+
+    def restore_hierarchy(self, origin: HierarchyOrigin) -> None:
+        """Rebuild the hierarchy of ``origin`` (as saved by a checkpoint) and its counters; the
+        next solve then keeps or rebuilds it exactly as the original run did."""
+        solver, _ = self.operator_for(origin.youngs_modulus_pa, origin.healthy)
+        self._krylov.build()
+        self._krylov.reuse = origin.reuse
+        self._origin = (solver.youngs_modulus_pa.copy(), solver.healthy.copy())
+
+    @property
+    def krylov(self) -> KrylovSolver:
+        """The CG solver shared by every topology (its hierarchy and reuse counters)."""
+        return self._krylov
 
     @property
     def solver(self) -> MechanicsSolver | None:
@@ -101,6 +152,7 @@ class FEMBackend:
             ersatz_ratio=self.ersatz_ratio,
             rtol=self.rtol,
             assembler=self.assembler,
+            krylov=self._krylov,
         )
         self._E = youngs_modulus_pa.copy()
         self.n_builds += 1
@@ -120,6 +172,8 @@ class FEMBackend:
         build_s = time.perf_counter() - t0
         res = solver.solve(pressure_pa, self.p0_pa, x0=warm_start)
         self.n_solves += 1
+        if res.stats.rebuilt:
+            self._origin = (solver.youngs_modulus_pa.copy(), solver.healthy.copy())
         loose = solver.fragments.loose
         return MechanicsOutput(
             u=res.u,
@@ -130,6 +184,7 @@ class FEMBackend:
             extra={
                 "operator_s": build_s,
                 "amg_setup_s": res.stats.amg_setup_s,
+                "amg_stale": res.stats.stale,
                 "solve_s": res.stats.solve_s,
             },
         )

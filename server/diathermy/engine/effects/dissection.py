@@ -47,6 +47,9 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
                 "reinitialized": res.reinitialized,
                 "tets_changed": changed,
                 "loose_tets": int(res.topology.loose.sum()),
+                "mode": "full",
+                "why": f"front advance on the grid ({res.n_active} nodes moving), topology of "
+                "every tet",
             },
         ),
         fields={"level_set": res.level_set, "removed": res.removed},

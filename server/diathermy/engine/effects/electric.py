@@ -75,7 +75,9 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
     if ctx.scene.solver.coupling == "monolithic" and ctx.has("thermal"):
         return Outcome(
             EffectReport(
-                True, "solved with the temperature by block-preconditioned GMRES (monolithic)"
+                True,
+                "solved with the temperature by block-preconditioned GMRES (monolithic)",
+                extra={"mode": "full", "why": "monolithic coupling with the heat step"},
             ),
             memory={"contacts": keys},
             handoff={"monolithic": MonolithicRequest(sigma, contact, drive)},
@@ -100,6 +102,10 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
                 "current_a": sol.current_a,
                 "residual": sol.stats.residual,
                 "reassembled": sol.stats.reassembled,
+                "setup_s": sol.stats.setup_s,
+                "mode": "full",
+                "why": "conductivity or contact changed: CG over the block from the last "
+                f"potential, AMG {'rebuilt' if sol.stats.setup_s > 0 else 'kept'}",
             },
         )
     return Outcome(report, fields=fields, memory={"contacts": keys}, handoff=handoff)

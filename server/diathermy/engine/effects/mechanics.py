@@ -6,6 +6,8 @@ strain_energy; remembers the (pressure, removed) it solved for, so an unchanged 
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from diathermy.engine.context import EngineContext
@@ -36,6 +38,22 @@ def skip(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome | No
     return None
 
 
+def mode_of(backend: str, extra: dict[str, Any]) -> dict[str, str]:
+    """Local or full, and why, for a backend that does not say so itself."""
+    if backend == "fem":
+        return {"mode": "full", "why": "full solve every step (mechanics.predictor 'none' or "
+                "solver.incremental false)"}  # fmt: skip
+    if extra.get("corrected"):
+        return {
+            "mode": "full",
+            "why": "the surrogate's residual exceeded the guard: CG on the block",
+        }
+    return {
+        "mode": "local",
+        "why": f"{backend} prediction, patch of {extra.get('patch_nodes', 0)} nodes",
+    }
+
+
 def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
     """Solve the displacement with the scene's backend (removed tissue as ersatz material)."""
     backend = ctx.mechanics
@@ -57,6 +75,7 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
                 "backend": backend.name,
                 "rebuilt": out.rebuilt,
                 "residual": out.residual,
+                **mode_of(backend.name, out.extra),
                 **out.extra,
             },
         ),

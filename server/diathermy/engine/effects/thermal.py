@@ -50,7 +50,12 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
             EffectReport(
                 True,
                 iterations=mono.heat.iterations,
-                extra={"coupling": "monolithic", "picard_passes": mono.picard_passes},
+                extra={
+                    "coupling": "monolithic",
+                    "picard_passes": mono.picard_passes,
+                    "mode": "full",
+                    "why": "monolithic coupling: potential and temperature of the whole block",
+                },
             ),
             fields={"temperature": mono.T, "potential": mono.V, "joule_heat": mono.q},
             heat=mono.energy,
@@ -64,6 +69,9 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
             extra={
                 "preconditioner": res.stats.preconditioner,
                 "fallback_nodes": int(res.stats.fallback_nodes.size),
+                "mode": "full",
+                "why": f"implicit heat step of the whole block ({res.stats.preconditioner}-CG, "
+                f"{res.stats.iterations} iterations: cheaper than any local scheme)",
             },
         ),
         fields={"temperature": res.T},

@@ -20,7 +20,13 @@ def never_skipped(ctx: EngineContext, state: SimulationState, step: Step) -> Out
 
 def desiccation(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
     """Nothing to do in the step itself: the electric effect reads the conductivity law."""
-    return Outcome(EffectReport(True, "applied in the conductivity of the next electric solve"))
+    return Outcome(
+        EffectReport(
+            True,
+            "applied in the conductivity of the next electric solve",
+            extra={"mode": "local", "why": "no work of its own"},
+        )
+    )
 
 
 def thermal_damage(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
@@ -28,4 +34,5 @@ def thermal_damage(ctx: EngineContext, state: SimulationState, step: Step) -> Ou
     omega = state["thermal_damage"] + arrhenius_damage_increment(
         step.T_old, state["temperature"], step.dt, ctx.damage_law
     )
-    return Outcome(EffectReport(True), fields={"thermal_damage": omega})
+    report = EffectReport(True, extra={"mode": "full", "why": "Arrhenius increment at every node"})
+    return Outcome(report, fields={"thermal_damage": omega})

@@ -40,7 +40,13 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
     latent = latent_heat_moved_j(ctx.disc.node_volumes_m3, x_old, eos.x, latent_heat_per_volume(t))
     return Outcome(
         EffectReport(
-            True, iterations=eos.iterations, extra={"vapor_nodes": int(np.count_nonzero(eos.x))}
+            True,
+            iterations=eos.iterations,
+            extra={
+                "vapor_nodes": int(np.count_nonzero(eos.x)),
+                "mode": "full",
+                "why": "pointwise EOS at every node (vectorised, no coupled solve)",
+            },
         ),
         fields={"temperature": eos.T, "vapor_fraction": eos.x, "pressure": eos.p},
         latent_j=latent,
