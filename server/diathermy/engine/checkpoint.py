@@ -184,6 +184,8 @@ def _hierarchy_state(ctx: EngineContext) -> dict[str, np.ndarray]:
     backend = ctx.built_mechanics
     if isinstance(backend, IncrementalFEMBackend):
         out["mechanics_since_full"] = np.asarray(backend.since_full)
+        if backend.last_E_pa is not None:
+            out["mechanics_last_E"] = backend.last_E_pa
     fem = fem_of(backend)
     origin = fem.hierarchy_origin if fem is not None else None
     if origin is not None:
@@ -211,6 +213,7 @@ def _restore_hierarchies(ctx: EngineContext, solver: dict[str, np.ndarray]) -> N
     backend = ctx.mechanics if ctx.has("mechanics") else None
     if isinstance(backend, IncrementalFEMBackend) and "mechanics_since_full" in solver:
         backend.since_full = int(solver["mechanics_since_full"])
+        backend.last_E_pa = solver.get("mechanics_last_E")
     fem = fem_of(backend)
     if "mechanics_hierarchy_E" in solver and fem is not None:
         fem.restore_hierarchy(

@@ -19,7 +19,7 @@ import scipy.sparse as sp
 
 from diathermy.physics.equilibrium_guard import ritz_scale
 from diathermy.physics.mechanics import MechanicsSolver
-from diathermy.physics.mechanics_backend import FEMBackend, MechanicsOutput
+from diathermy.physics.mechanics_backend import FEMBackend, MechanicsOutput, Rescaled
 from diathermy.physics.patch_correction import node_graph, patch_correct, residual_patch
 
 DEFAULT_GUARD_TOLERANCE = 1e-2
@@ -50,7 +50,7 @@ class LocalSolve:
     u: np.ndarray
     residual: float
     residual_before: float
-    patch_nodes: int
+    patch_nodes: np.ndarray  # nodes where u is not ritz_scale x u_prev
     ritz_scale: float
 
 
@@ -78,9 +78,9 @@ def local_solve(
         max_nodes=settings.patch_max_nodes,
     )
     patched = patch_correct(solver.K, f, u, Ku, free, nodes)
-    return LocalSolve(
-        patched.u, patched.residual_after, patched.residual_before, patched.nodes, alpha
-    )
+    held = np.flatnonzero(np.any(~free & (u_prev != 0), axis=1))  # zeroed constrained values
+    moved = np.union1d(nodes if patched.nodes else nodes[:0], held)
+    return LocalSolve(patched.u, patched.residual_after, patched.residual_before, moved, alpha)
 
 
 class IncrementalFEMBackend:
@@ -97,6 +97,7 @@ class IncrementalFEMBackend:
         self.n_local = 0
         self.n_full = 0
         self._forced: str | None = None
+        self.last_E_pa: np.ndarray | None = None  # E per tet of the solve behind the warm start
 
     def force_full(self, why: str) -> None:
         """Solve the next step in full, saying ``why``."""
@@ -136,7 +137,7 @@ class IncrementalFEMBackend:
             )
             extra.update(
                 residual_before=local.residual_before,
-                patch_nodes=local.patch_nodes,
+                patch_nodes=int(local.patch_nodes.size),
                 ritz_scale=local.ritz_scale,
                 local_s=time.perf_counter() - t0 - operator_s,
             )
@@ -145,6 +146,7 @@ class IncrementalFEMBackend:
                 self.since_full += 1
                 self.n_local += 1
                 loose = solver.fragments.loose
+                previous_E, self.last_E_pa = self.last_E_pa, solver.youngs_modulus_pa
                 extra.update(
                     mode="local",
                     why=f"residual {local.residual:.1e} <= {tol:.0e}",
@@ -155,6 +157,9 @@ class IncrementalFEMBackend:
                     residual=local.residual,
                     rebuilt=rebuilt,
                     loose_tets=loose if loose.any() else None,
+                    rescaled=None
+                    if previous_E is None
+                    else Rescaled(local.ritz_scale, local.patch_nodes, previous_E),
                     extra=extra,
                 )
             why = f"residual {local.residual:.1e} > {tol:.0e} after the patch"
@@ -169,6 +174,7 @@ class IncrementalFEMBackend:
         self.since_full = 0
         self.n_full += 1
         self._forced = None
+        self.last_E_pa = self.fem.solver.youngs_modulus_pa if self.fem.solver else None
         return MechanicsOutput(
             u=out.u,
             iterations=out.iterations,
