@@ -58,8 +58,9 @@ def run_scene(name: Any, steps: int, model: str | None, guard_tol: float) -> dic
 
     configure_threads()
     torch.set_num_threads(1)
-    scene = (builtin_scene(name) if isinstance(name, str) else name).model_copy(
-        update={"steps": steps}
+    scene = builtin_scene(name) if isinstance(name, str) else name
+    scene = scene.model_copy(  # the FEM reference solves in full every step
+        update={"steps": steps, "solver": scene.solver.model_copy(update={"incremental": False})}
     )
     fem = Simulation(scene)
     t = fem.tissue

@@ -1,6 +1,19 @@
-"""Real time (issue #25): what each solver saving buys per cutting step, one command.
+"""Real time (issue #25): what a cutting step costs, full against incremental, one command.
 
-    python benchmarks/realtime.py solvers [--grids uniform 0.5] [--steps N] [--rounds N]
+    python benchmarks/realtime.py run [--grids 0 0.5] [--steps N]
+    python benchmarks/realtime.py solvers [--grids 0 0.5] [--steps N] [--rounds N]
+
+``run``: the fixed-electrode scene (as below) from the checkpoint two steps after the first cut,
+in three modes stepped in lockstep (one step of each in turn, so that other load on a shared
+machine hits them alike): ``full`` (``solver.incremental`` false: every effect solved in full
+every step, the reference), ``incremental`` (the default: the mechanics from the previous
+displacement, Ritz-scaled, patch-corrected, a full solve when the residual check or the
+interval asks for it) and, on the uniform 33x33x65 grid that has a shipped model,
+``cnn`` (the CNN predictor with its patch). Per mode: median and p90 wall time per step, the
+real-time factor (dt / median wall), the mechanics' share of local steps, and against ``full``
+at the same step the max and mean strain-energy error and the max temperature error, and the
+final cut-volume difference. Writes ``benchmarks/results/realtime.md`` and ``realtime.png``
+(wall time per step).
 
 ``solvers``: the fixed-electrode scene (current-density drive, ``benchmarks/convergence.py``'s
 ``scene_for``) on uniform 33x33x65 and on the graded 0.5 mm grid, from one checkpoint per grid
@@ -12,7 +25,9 @@ the last:
 - ``main``: the solvers as on main: a new AMG hierarchy whenever the operator changes (the
   mechanics with every cut, the potential with every conductivity change), CG warm-started
   from the previous solution as is;
-- ``+ritz``: the warm start Ritz-scaled (``KrylovSolver.ritz``);
+- ``+ritz``: the mechanics' warm start Ritz-scaled (``KrylovSolver.ritz``; the results' table
+  was measured with the potential's Ritz-scaled too, which took 44 CG iterations against 33 on
+  the graded grid, so the potential no longer scales its warm start);
 - ``+reuse``: hierarchies kept across operator changes, fine level refreshed
   (``KrylovSolver.stale_factor``, the engine's defaults);
 - ``+local``: the mechanics prolongation smoother weighted by local row sums instead of a
@@ -20,7 +35,8 @@ the last:
 
 Per variant: the median over steps and rounds of the step's wall time, the mechanics and the
 electric effect's wall time, CG iterations and AMG set-ups per step, and each ratio to
-``main``. Writes ``benchmarks/results/realtime_solvers.md``.
+``main`` (all in the full mode, ``solver.incremental`` false, so that only the solvers differ).
+Writes ``benchmarks/results/realtime_solvers.md``.
 """
 
 from __future__ import annotations
@@ -39,9 +55,12 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from convergence import scene_for  # noqa: E402
 
+from diathermy.engine import checkpoint as persistence  # noqa: E402
+from diathermy.engine.backends import fem_of  # noqa: E402
 from diathermy.engine.simulation import Simulation  # noqa: E402
 from diathermy.physics.mechanics import DEFAULT_AMG_OPTIONS  # noqa: E402
-from diathermy.physics.mechanics_backend import FEMBackend  # noqa: E402
+from diathermy.physics.strain_energy import relative_strain_energy_error  # noqa: E402
+from diathermy.scene import Scene  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results"
 CACHE = ROOT / "runs" / "realtime"
@@ -76,11 +95,11 @@ def checkpoint(fine_mm: float) -> Path:
 def configure(sim: Simulation, variant: str) -> None:
     """Turn the savings after ``variant`` off on a freshly loaded simulation."""
     level = VARIANTS.index(variant)
-    backend = sim.ctx.mechanics
-    assert isinstance(backend, FEMBackend)
+    backend = fem_of(sim.ctx.mechanics)
+    assert backend is not None
     krylovs = [sim.ctx.potential.solver.krylov, backend.krylov]
     for k in krylovs:
-        k.ritz = level >= 1
+        k.ritz = level >= 1 and k is backend.krylov
         if level < 2:
             k.stale_factor = 0.0
             k.reuse = type(k.reuse)(rebuild_due=True)
@@ -89,8 +108,27 @@ def configure(sim: Simulation, variant: str) -> None:
         backend.krylov.reuse = type(backend.krylov.reuse)(rebuild_due=True)  # set up anew
 
 
+def load_as(path: Path, **mechanics: Any) -> Simulation:
+    """The checkpoint continued with ``solver.incremental`` and mechanics settings changed
+    (``incremental`` among them), exactly as ``Simulation.load_checkpoint`` continues it."""
+    saved = persistence.read_checkpoint(path)
+    data = saved.scene.model_dump()
+    data["solver"]["incremental"] = mechanics.pop("incremental", True)
+    data["mechanics"].update(mechanics)
+    sim = Simulation(Scene.model_validate(data))
+    st = sim.state
+    st.step, st.time_s, st.arrays = saved.step, saved.time_s, saved.arrays
+    st.energy, st.overrides = saved.energy, saved.overrides
+    sim.restore_solver_state(
+        saved.solver,
+        steps_since_reinit=saved.steps_since_reinit,
+        mechanics_current=saved.mechanics_current,
+    )
+    return sim
+
+
 def run_variant(path: Path, variant: str, steps: int) -> list[dict[str, float]]:
-    sim = Simulation.load_checkpoint(path)
+    sim = load_as(path, incremental=False)
     configure(sim, variant)
     rows = []
     for _ in range(steps):
@@ -110,16 +148,105 @@ def run_variant(path: Path, variant: str, steps: int) -> list[dict[str, float]]:
     return rows
 
 
+MODES: dict[str, dict[str, Any]] = {
+    "full": {"incremental": False},
+    "incremental": {},
+    "cnn": {"backend": "cnn"},
+}
+
+
+def run_modes(path: Path, fine_mm: float, steps: int) -> dict[str, dict[str, list[float]]]:
+    """Every mode from the checkpoint, stepped in lockstep; per mode the per-step records."""
+    names = [m for m in MODES if m != "cnn" or fine_mm <= 0]
+    sims = {m: load_as(path, **dict(MODES[m])) for m in names}
+    rec: dict[str, dict[str, list[float]]] = {
+        m: {k: [] for k in ("wall_s", "se_err", "dT_k", "local", "cut_m3")} for m in names
+    }
+    for _ in range(steps):
+        for m, sim in sims.items():
+            r = sim.step()
+            mech = r.effects["mechanics"]
+            rec[m]["wall_s"].append(r.wall_s)
+            rec[m]["local"].append(float(mech.ran and mech.extra.get("mode") == "local"))
+            rec[m]["cut_m3"].append(r.cut_volume_m3)
+        ref = sims["full"].state
+        for m, sim in sims.items():
+            W, W_ref = sim.state["strain_energy"], ref["strain_energy"]
+            rec[m]["se_err"].append(relative_strain_energy_error(W, W_ref) if W_ref.any() else 0.0)
+            rec[m]["dT_k"].append(
+                float(np.abs(sim.state["temperature"] - ref["temperature"]).max())
+            )
+    return rec
+
+
+def write_run(results: dict, a: argparse.Namespace, started: str, dt_s: float) -> None:
+    lines = [
+        "# Real time: a cutting step, full against incremental",
+        "",
+        f"`python benchmarks/realtime.py run --steps {a.steps}` (started {started}): the "
+        "fixed-electrode scene (current-density drive) from the checkpoint two steps after the "
+        f"first cut, {a.steps} steps per mode, the modes stepped in lockstep. A short run on a "
+        "shared 2-core machine with other sessions' jobs beside it (load 3-5): wall times are "
+        "inflated alike for every mode, read the ratios. Errors are against the full mode at "
+        "the same step (strain energy: the paper's relative L2 over tets).",
+        "",
+        "| grid | mode | median step s | p90 step s | x full | real-time factor | local mechanics steps | max SE error | mean SE error | max T error K | cut volume vs full |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for fine, rec in results.items():
+        base = float(np.median(rec["full"]["wall_s"]))
+        for m, r in rec.items():
+            med, p90 = float(np.median(r["wall_s"])), float(np.percentile(r["wall_s"], 90))
+            cut, cut_ref = r["cut_m3"][-1], rec["full"]["cut_m3"][-1]
+            rel_cut = (cut - cut_ref) / cut_ref if cut_ref > 0 else 0.0
+            lines.append(
+                f"| {grid_label(fine)} | {m} | {med:.2f} | {p90:.2f} | {med / base:.2f} | "
+                f"{dt_s / med:.3f} | {int(sum(r['local']))}/{len(r['local'])} | "
+                f"{max(r['se_err']):.2e} | {np.mean(r['se_err']):.2e} | {max(r['dT_k']):.2e} | "
+                f"{rel_cut:+.2e} |"
+            )
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    (RESULTS / "realtime.md").write_text("\n".join(lines) + "\n")
+    plot_run(results)
+    print("\n".join(lines))
+
+
+def plot_run(results: dict) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(results), figsize=(5 * len(results), 3.5), squeeze=False)
+    for ax, (fine, rec) in zip(axes[0], results.items(), strict=True):
+        for m, r in rec.items():
+            ax.plot(r["wall_s"], marker="o", label=m)
+        ax.set_title(grid_label(fine))
+        ax.set_xlabel("step after the checkpoint")
+        ax.set_ylabel("wall time per step (s)")
+        ax.set_yscale("log")
+        ax.legend()
+    fig.tight_layout()
+    fig.savefig(RESULTS / "realtime.png", dpi=100)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("run", help="full vs incremental per step, with the errors")
+    r.add_argument("--grids", nargs="+", type=float, default=[0.0, 0.5], help="0: uniform")
+    r.add_argument("--steps", type=int, default=12)
     s = sub.add_parser("solvers", help="per-saving cost of a cutting step")
     s.add_argument("--grids", nargs="+", type=float, default=[0.0, 0.5], help="0: uniform")
     s.add_argument("--steps", type=int, default=6)
     s.add_argument("--rounds", type=int, default=1)
     a = ap.parse_args()
-    results: dict[float, dict[str, list[dict[str, float]]]] = {}
     started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+    if a.cmd == "run":
+        runs = {fine: run_modes(checkpoint(fine), fine, a.steps) for fine in a.grids}
+        write_run(runs, a, started, scene_for(0.0, moving=False).dt_s)
+        return
+    results: dict[float, dict[str, list[dict[str, float]]]] = {}
     for fine in a.grids:
         path = checkpoint(fine)
         results[fine] = {v: [] for v in VARIANTS}

@@ -12,6 +12,11 @@ from pathlib import Path
 
 from diathermy.engine.context import EngineContext
 from diathermy.errors import SceneError
+from diathermy.physics.incremental_mechanics import (
+    DEFAULT_GUARD_TOLERANCE,
+    IncrementalFEMBackend,
+    IncrementalSettings,
+)
 from diathermy.physics.mechanics_backend import FEMBackend, MechanicsBackend
 
 ModelResolver = Callable[[str | None, tuple[int, int, int]], Path]
@@ -36,19 +41,35 @@ def shipped_models(model: str | None, grid: tuple[int, int, int]) -> Path:
     )
 
 
+def fem_of(backend: MechanicsBackend | None) -> FEMBackend | None:
+    """The FEM backend that solves in full (the incremental one's, or the backend itself)."""
+    if isinstance(backend, IncrementalFEMBackend):
+        return backend.fem
+    return backend if isinstance(backend, FEMBackend) else None
+
+
 def make_backend(
     ctx: EngineContext, *, models: ModelResolver | None, position: PositionFn
 ) -> MechanicsBackend:
     """The backend ``ctx.scene.mechanics`` asks for."""
     cfg, tissue = ctx.scene.mechanics, ctx.tissue
     if cfg.backend == "fem":
-        return FEMBackend(
+        fem = FEMBackend(
             ctx.disc.mesh,
             poisson_ratio=tissue.poisson_ratio,
             p0_pa=tissue.p_atm_pa,
             rtol=cfg.rtol,
             ersatz_ratio=tissue.ersatz_stiffness_ratio,
         )
+        if not (ctx.scene.solver.incremental and cfg.predictor == "previous"):
+            return fem
+        settings = IncrementalSettings(
+            guard_tolerance=cfg.guard_tolerance or DEFAULT_GUARD_TOLERANCE,
+            full_every=cfg.full_every,
+            patch_threshold=cfg.patch_threshold,
+            patch_layers=cfg.patch_layers,
+        )
+        return IncrementalFEMBackend(fem, settings)
     if cfg.backend in ("cnn", "pgd") and not ctx.disc.grid.is_uniform:
         shape = "x".join(str(n) for n in ctx.disc.grid.shape)
         raise SceneError(

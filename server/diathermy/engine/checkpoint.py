@@ -20,6 +20,7 @@ import h5py
 import numpy as np
 from pydantic import ValidationError
 
+from diathermy.engine.backends import fem_of
 from diathermy.engine.context import EngineContext
 from diathermy.engine.effects.electric import conductivity
 from diathermy.engine.effects.mechanics import load_key
@@ -30,7 +31,8 @@ from diathermy.errors import CheckpointError, MeshError
 from diathermy.fem.solvers import ReuseState
 from diathermy.mesh.grid_attrs import grid_attrs, grid_from_attrs
 from diathermy.physics.electric import contact_weights
-from diathermy.physics.mechanics_backend import FEMBackend, HierarchyOrigin
+from diathermy.physics.incremental_mechanics import IncrementalFEMBackend
+from diathermy.physics.mechanics_backend import HierarchyOrigin
 from diathermy.physics.topology import evaluate_topology
 from diathermy.scene import Scene
 from diathermy.version import __version__
@@ -180,7 +182,12 @@ def _hierarchy_state(ctx: EngineContext) -> dict[str, np.ndarray]:
         out["potential_hierarchy_reuse"] = _reuse_array(solver.krylov.reuse)
         out["potential_operator_sigma"] = np.asarray(solver.sigma)
     backend = ctx.built_mechanics
-    origin = backend.hierarchy_origin if isinstance(backend, FEMBackend) else None
+    if isinstance(backend, IncrementalFEMBackend):
+        out["mechanics_since_full"] = np.asarray(backend.since_full)
+        if backend.last_E_pa is not None:
+            out["mechanics_last_E"] = backend.last_E_pa
+    fem = fem_of(backend)
+    origin = fem.hierarchy_origin if fem is not None else None
     if origin is not None:
         out["mechanics_hierarchy_E"] = origin.youngs_modulus_pa
         out["mechanics_hierarchy_healthy"] = origin.healthy
@@ -203,8 +210,13 @@ def _restore_hierarchies(ctx: EngineContext, solver: dict[str, np.ndarray]) -> N
             solver["potential_hierarchy_sigma"], _reuse_state(solver["potential_hierarchy_reuse"])
         )
         ctx.potential.solver.set_conductivity(solver["potential_operator_sigma"])
-    if "mechanics_hierarchy_E" in solver and isinstance(ctx.mechanics, FEMBackend):
-        ctx.mechanics.restore_hierarchy(
+    backend = ctx.mechanics if ctx.has("mechanics") else None
+    if isinstance(backend, IncrementalFEMBackend) and "mechanics_since_full" in solver:
+        backend.since_full = int(solver["mechanics_since_full"])
+        backend.last_E_pa = solver.get("mechanics_last_E")
+    fem = fem_of(backend)
+    if "mechanics_hierarchy_E" in solver and fem is not None:
+        fem.restore_hierarchy(
             HierarchyOrigin(
                 solver["mechanics_hierarchy_E"],
                 solver["mechanics_hierarchy_healthy"].astype(bool),

@@ -183,6 +183,9 @@ class PotentialSolver:
             amg_options=opts,
             stale_factor=stale_factor,
             max_stale_solves=max_stale_solves,
+            # the last potential as is: Ritz-scaled it took 44 CG iterations against 33 on the
+            # graded 0.5 mm cut (benchmarks/results/realtime_solvers.md, same fresh hierarchies)
+            ritz=False,
         )
         self.hierarchy_sigma: np.ndarray | None = None  # the conductivity the AMG was built for
         self.sigma: np.ndarray | None = None

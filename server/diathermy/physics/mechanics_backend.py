@@ -26,6 +26,16 @@ MECHANICS_MAX_STALE_SOLVES = 100
 
 
 @dataclass(frozen=True)
+class Rescaled:
+    """u = alpha x the warm start on every node but ``nodes``; ``previous_E_pa`` (n_tets,) is the
+    E per tet (loose fragments ersatz) of the solve that gave the warm start."""
+
+    alpha: float
+    nodes: np.ndarray
+    previous_E_pa: np.ndarray
+
+
+@dataclass(frozen=True)
 class MechanicsOutput:
     """A backend's answer: nodal displacement (n_nodes, 3) in m, plus what it cost."""
 
@@ -34,6 +44,7 @@ class MechanicsOutput:
     residual: float = 0.0
     rebuilt: bool = False
     loose_tets: np.ndarray | None = None  # tets a solver decided to remove (loose fragments)
+    rescaled: Rescaled | None = None  # set when u is the warm start rescaled but for a few nodes
     extra: dict[str, Any] = field(default_factory=dict)
 
 
@@ -200,10 +211,15 @@ def solve_with_cut(
     tissue: Tissue,
     grads: np.ndarray,
     tets: np.ndarray,
+    previous_W: np.ndarray | None = None,
 ) -> tuple[MechanicsOutput, np.ndarray]:
     """Displacement under the pore pressure (Pa) with the cut as ersatz material, and the strain
     energy density per tet (J/m^3) of the stiffness it was solved with (a loose fragment is
-    ersatz too). The one mechanics step of the engine and the dataset generator."""
+    ersatz too). The one mechanics step of the engine and the dataset generator.
+
+    ``previous_W`` (n_tets,) is the strain energy of the warm start: when the backend says u is
+    alpha x the warm start but on a few nodes (``MechanicsOutput.rescaled``), W is alpha^2 x it
+    except on the tets of those nodes and the tets whose E changed, which are recomputed."""
     E = ersatz_youngs_modulus(~removed, tissue.youngs_modulus_pa, tissue.ersatz_stiffness_ratio)
     out = backend.solve(
         pressure_pa=pressure_pa,
@@ -215,5 +231,14 @@ def solve_with_cut(
     E_eff = E.copy()
     if out.loose_tets is not None:
         E_eff[out.loose_tets] = tissue.ersatz_stiffness_ratio * tissue.youngs_modulus_pa
-    W = strain_energy_density(grads, tets, out.u, E_eff, tissue.poisson_ratio)
+    r = out.rescaled
+    if r is None or previous_W is None:
+        return out, strain_energy_density(grads, tets, out.u, E_eff, tissue.poisson_ratio)
+    moved = np.zeros(out.u.shape[0], dtype=bool)
+    moved[r.nodes] = True
+    redo = np.flatnonzero(moved[tets].any(axis=1) | (E_eff != r.previous_E_pa))
+    W = (r.alpha * r.alpha) * previous_W
+    W[redo] = strain_energy_density(
+        grads[redo], tets[redo], out.u, E_eff[redo], tissue.poisson_ratio
+    )
     return out, W

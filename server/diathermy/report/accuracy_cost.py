@@ -54,6 +54,8 @@ class Row:
     guard_tolerance: float | None = None
     correction: str = "none"  # cnn: "patch" or "none" (fem and pgd: "none")
     compared_steps: int = 0  # steps where the reference had strain energy to compare against
+    incremental: bool = False  # fem: the previous-displacement predictor (issue #25)
+    full_every: int = 10
 
     @property
     def worst_error(self) -> float:
@@ -137,6 +139,8 @@ def _row(
             model=rec.variant.model,
             guard_tolerance=rec.variant.guard_tolerance,
             correction=rec.variant.correction,
+            incremental=rec.variant.incremental,
+            full_every=rec.variant.full_every,
         ), np.array([])
     step = np.asarray(rec.step_s)
     mech = np.asarray(rec.effect_s.get("mechanics", [0.0]))
@@ -173,6 +177,8 @@ def _row(
         guard_tolerance=rec.variant.guard_tolerance,
         correction=rec.variant.correction,
         compared_steps=int(active.sum()),
+        incremental=rec.variant.incremental,
+        full_every=rec.variant.full_every,
     ), se
 
 

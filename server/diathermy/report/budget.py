@@ -77,5 +77,8 @@ def resolve_accuracy_budget(scene: Scene, report_path: str | Path | None = None)
         correction=row.get("correction", "none"),  # reports before the patch: the network's u
         model=row.get("model") if row.get("model") and Path(row["model"]).exists() else None,
     )  # fmt: skip
+    if row["backend"] == "fem":  # rows measured before issue #25 solved in full
+        data["mechanics"]["full_every"] = row.get("full_every", 10)
+        data["solver"]["incremental"] = bool(row.get("incremental", False))
     data["accuracy_budget"] = None  # resolved: the chosen variant is now explicit
     return scene_from_dict(data)

@@ -26,6 +26,8 @@ class Variant:
     guard_tolerance: float | None = None
     coupling: Literal["staggered", "monolithic"] = "staggered"
     correction: Literal["none", "patch"] = "none"  # cnn only: the network's u, or patched
+    incremental: bool = False  # fem: the previous-displacement predictor (issue #25)
+    full_every: int = 10  # ... with a full solve at least every this many solves
 
     def apply(self, scene: Scene, steps: int) -> Scene:
         """The scene as this variant runs it."""
@@ -33,7 +35,11 @@ class Variant:
         data["steps"] = steps
         if self.grid is not None:
             data["grid"] = list(self.grid)
-        data["solver"] = {**data["solver"], "coupling": self.coupling}
+        data["solver"] = {
+            **data["solver"],
+            "coupling": self.coupling,
+            "incremental": self.incremental,
+        }
         data["mechanics"] = {
             **data["mechanics"],
             "backend": self.backend,
@@ -41,6 +47,7 @@ class Variant:
             "model": self.model,
             "guard_tolerance": self.guard_tolerance,
             "correction": self.correction,
+            "full_every": self.full_every,
         }
         return scene_from_dict(data)
 
@@ -67,7 +74,8 @@ def _grid_name(grid: tuple[int, int, int] | None) -> str:
 
 
 def default_variants(models: dict[str, str] | None = None) -> list[Variant]:
-    """FEM at four tolerances, monolithic coupling and a coarser grid, plus the surrogates given.
+    """FEM at four tolerances, monolithic coupling, a coarser grid and incremental stepping (a full
+    solve every 10 and every 50 steps), plus the surrogates given.
 
     ``models`` maps variant names to model files, e.g. {"cnn-w16": "model.pt", "pgd-15": "pgd.npz"};
     a name starting with "cnn" runs the CNN backend: the network alone, with the patch
@@ -81,6 +89,8 @@ def default_variants(models: dict[str, str] | None = None) -> list[Variant]:
         Variant("fem-rtol1e-8", rtol=1e-8),
         Variant("fem-rtol1e-6-monolithic", rtol=1e-6, coupling="monolithic"),
         Variant("fem-coarse-rtol1e-6", rtol=1e-6, grid=(17, 17, 33)),
+        Variant("fem-incremental", rtol=1e-6, incremental=True),
+        Variant("fem-incremental-full50", rtol=1e-6, incremental=True, full_every=50),
     ]
     for name, path in (models or {}).items():
         if name.startswith("cnn"):

@@ -117,6 +117,12 @@ class SolverConfig(_Model):
     electric_rtol: Annotated[float, Field(gt=0, lt=1)] = 1e-9
     thermal_rtol: Annotated[float, Field(gt=0, lt=1)] = 1e-9
     coupling: Literal["staggered", "monolithic"] = "staggered"
+    incremental: bool = Field(
+        True,
+        description="each step costs what changed: the mechanics starts from its predictor "
+        "(mechanics.predictor) and solves in full only when the residual check or the interval "
+        "asks for it; false solves every effect in full every step (the reference)",
+    )
 
 
 class MechanicsConfig(_Model):
@@ -125,10 +131,21 @@ class MechanicsConfig(_Model):
     backend: Literal["fem", "cnn", "pgd"] = "fem"
     rtol: Annotated[float, Field(gt=0, lt=1)] = 1e-6
     model: str | None = Field(None, description="surrogate model path or registry name")
+    predictor: Literal["previous", "none"] = Field(
+        "previous",
+        description="fem, incremental: 'previous' starts from the last displacement, Ritz-scaled "
+        "and patch-corrected, accepted when its relative residual is at most guard_tolerance "
+        "(default 1e-2), else solved in full; 'none' solves in full every step. The CNN "
+        "predictor is backend 'cnn'",
+    )
+    full_every: Annotated[int, Field(ge=1, le=10000)] = Field(
+        10, description="fem predictor 'previous': a full solve at least every this many solves"
+    )
     guard_tolerance: Annotated[float, Field(gt=0)] | None = Field(
         None,
         description="cnn: relative equilibrium residual above which the prediction is corrected "
-        "by CG; pgd: estimated strain-energy error above which a mode is enriched online",
+        "by CG; fem with predictor 'previous': above which it is solved in full; pgd: "
+        "estimated strain-energy error above which a mode is enriched online",
     )
     correction: Literal["none", "patch"] = Field(
         "patch",
@@ -137,10 +154,12 @@ class MechanicsConfig(_Model):
         "keeps the network's displacement. fem and pgd ignore it",
     )
     patch_threshold: Annotated[float, Field(gt=0, le=1)] = Field(
-        0.1, description="cnn patch: seed nodes whose residual force reaches this x its peak"
+        0.1,
+        description="cnn and fem-previous patch: seed nodes whose residual force reaches "
+        "this x its peak",
     )
     patch_layers: Annotated[int, Field(ge=0, le=8)] = Field(
-        2, description="cnn patch: rings of neighbouring nodes added around the seeds"
+        2, description="cnn and fem-previous patch: rings of neighbours added around the seeds"
     )
 
 

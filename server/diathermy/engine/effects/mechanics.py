@@ -66,6 +66,7 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
         tissue=ctx.tissue,
         grads=ctx.disc.geom.grads,
         tets=ctx.disc.mesh.tets,
+        previous_W=state["strain_energy"],
     )
     return Outcome(
         EffectReport(
