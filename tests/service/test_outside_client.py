@@ -117,6 +117,10 @@ def test_electrode_drive_is_range_checked_when_it_arrives(
     for change, field in [
         ({"power_w": 1e300}, "body.power_w"),
         ({"current_density_a_per_m2": 1e30}, "body.current_density_a_per_m2"),
+        ({"power_w": False}, "body.power_w"),  # a bool is not a number (found by schemathesis)
+        ({"power_w": "30"}, "body.power_w"),
+        ({"position_m": [True, 0.0]}, "body.position_m.0"),
+        ({"active": 1}, "body.active"),
     ]:
         r = api.patch(f"/v1/sessions/{sid}/electrodes/active", json=change)
         assert r.status_code == 422 and r.json()["field"] == field, r.text
@@ -130,6 +134,11 @@ def test_electrode_drive_is_range_checked_when_it_arrives(
     with open_stream(live, sid) as ws:
         recv(ws)
         ws.send(json.dumps({"type": "electrode", "power_w": 1e300}))
+        err = recv_type(ws, "error")
+        assert err["error"] == "bad_message" and err["field"] == "electrode.power_w"
+    with open_stream(live, sid) as ws:  # a bad message closes the stream: a new one
+        recv(ws)
+        ws.send(json.dumps({"type": "electrode", "power_w": True}))
         err = recv_type(ws, "error")
         assert err["error"] == "bad_message" and err["field"] == "electrode.power_w"
 

@@ -8,9 +8,10 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, TypeAdapter
 
 from diathermy.service.limits import MAX_CURRENT_DENSITY_A_PER_M2, MAX_POWER_W
+from diathermy.service.schemas import Number
 
 
 class _Msg(BaseModel):
@@ -35,14 +36,14 @@ class ElectrodeControl(_Msg):
 
     type: Literal["electrode"]
     name: str = "active"
-    position_m: tuple[float, float] | None = Field(
+    position_m: tuple[Number, Number] | None = Field(
         None, description="(x, y) on the top surface, m, within the block"
     )
-    power_w: float | None = Field(None, ge=0, le=MAX_POWER_W, allow_inf_nan=False)
-    current_density_a_per_m2: float | None = Field(
+    power_w: Number | None = Field(None, ge=0, le=MAX_POWER_W, allow_inf_nan=False)
+    current_density_a_per_m2: Number | None = Field(
         None, ge=0, le=MAX_CURRENT_DENSITY_A_PER_M2, allow_inf_nan=False
     )
-    active: bool | None = None
+    active: StrictBool | None = None
     tag: str | int | None = Field(None, description="echoed in the ack")
 
 

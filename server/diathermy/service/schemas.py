@@ -4,10 +4,13 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, model_validator
 
 from diathermy.scene import Scene
 from diathermy.service.limits import MAX_CURRENT_DENSITY_A_PER_M2, MAX_POWER_W
+
+Number = Annotated[float, Field(strict=True)]
+"""A JSON number (an integer is one); a bool or a numeric string is refused, not coerced."""
 
 
 class _In(BaseModel):
@@ -102,20 +105,20 @@ class StepResult(BaseModel):
 class ElectrodeUpdate(_In):
     """Run-time changes to one electrode, applied before the next step; omitted means unchanged."""
 
-    position_m: tuple[float, float] | None = Field(
+    position_m: tuple[Number, Number] | None = Field(
         None, description="(x, y) on the top surface, m, within the block"
     )
-    power_w: float | None = Field(
+    power_w: Number | None = Field(
         None, ge=0, le=MAX_POWER_W, allow_inf_nan=False, description="W; switches to power drive"
     )
-    current_density_a_per_m2: float | None = Field(
+    current_density_a_per_m2: Number | None = Field(
         None,
         ge=0,
         le=MAX_CURRENT_DENSITY_A_PER_M2,
         allow_inf_nan=False,
         description="A/m^2; switches to current-density drive",
     )
-    active: bool | None = None
+    active: StrictBool | None = None
 
 
 class ElectrodeAck(BaseModel):
