@@ -11,16 +11,14 @@ import pytest
 
 from diathermy.engine.simulation import Simulation
 from diathermy.errors import CheckpointError
-from diathermy.scene import builtin_scene, scene_from_dict
+from diathermy.scene import builtin_scene
 from diathermy.service.engine import DefaultEngine
 from diathermy.service.journal import Journal, mark_checkpoint
 from diathermy.service.registry import SessionRecord, SessionRegistry
 
 
 def small_sim() -> Simulation:
-    data = builtin_scene("default").model_dump()
-    data["grid"] = (5, 5, 9)
-    return Simulation(scene_from_dict(data))
+    return Simulation(builtin_scene("default").on_uniform_grid((5, 5, 9)))
 
 
 def run(reg: SessionRegistry, rec: SessionRecord, plan: list[object]) -> None:
