@@ -36,7 +36,7 @@ def test_without_resolution_the_grid_is_the_uniform_one():
 @pytest.mark.parametrize(
     ("name", "fine_m", "depth_m"),
     [
-        ("default", 1e-3, 12e-3),
+        ("default", 1e-3, 3e-3),
         ("fixed-electrode", 0.4e-3, 12e-3),
         ("coagulation", 0.4e-3, 12e-3),
         ("moving-electrode", 1e-3, 3e-3),

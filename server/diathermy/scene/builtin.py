@@ -20,9 +20,9 @@ MOVING_RESOLUTION = Resolution(fine_m=1e-3, depth_m=3e-3)
 """The moving electrodes' grid: 1 mm cells over the path's bounding box + 2 mm, 3 mm deep. The
 whole path is the working region, so finer cells cost nodes fast (0.5 mm: 1.3 M nodes)."""
 
-MAIN_JOB_RESOLUTION = Resolution(fine_m=1e-3)
-"""The default main job's grid: the fixed electrode's working region at 1 mm, so that the set-up's
-main job stays a few minutes on 2 cores."""
+MAIN_JOB_RESOLUTION = Resolution(fine_m=1e-3, depth_m=3e-3)
+"""The default main job's grid: 1 mm over the contact + 2 mm, 3 mm deep, so that the set-up's main
+job stays a few minutes on 2 cores (12 mm deep: 2.5x the uniform 33x33x65's time, measured)."""
 
 
 def _fixed() -> Scene:
