@@ -403,17 +403,19 @@ def report() -> None:
             f"{s['p_peak'] / 1e3:.0f} | {s['step_median']:.2f} | {s['rss']:.0f} |"
         )
     graded = [k for k in fixed if float(runs[k]["fine_mm"]) > 0]
-    if graded:  # every run at the time the shortest one reached
-        tc = min(sums[k]["t_end"] for k in graded)
-        fin = _at(runs[graded[-1]]["time_s"], runs[graded[-1]]["cut_m3"], tc)
+    ends = sorted({round(sums[k]["t_end"], 6) for k in graded})
+    for tc in ends[:-1] if len(ends) > 1 else ends:  # each graded run's end, as far as others go
+        here = [k for k in fixed if sums[k]["t_end"] >= tc - 1e-6]
+        top = [k for k in graded if k in here][-1]
+        fin = _at(runs[top]["time_s"], runs[top]["cut_m3"], tc)
         lines += [
             "",
-            f"At t = {tc:.2f} s, the last time every graded run reached:",
+            f"At t = {tc:.2f} s (the runs that reached it; 'finest' is {top}):",
             "",
             "| grid | cut mm^3 | depth mm | cut / finest |",
             "|---|---:|---:|---:|",
         ]
-        for k in fixed:
+        for k in here:
             d = runs[k]
             cut, depth = _at(d["time_s"], d["cut_m3"], tc), _at(d["time_s"], d["depth_m"], tc)
             rel = cut / fin if fin else math.nan
@@ -421,6 +423,7 @@ def report() -> None:
                 f"| {k.removeprefix('fixed_')} | {_fmt(cut, 1e9)} | {_fmt(depth, 1e3)} | "
                 f"{_fmt(rel, 1.0, 3)} |"
             )
+    if graded:
         finest = sums[graded[-1]]
         lines += ["", f"Relative to the finest run ({graded[-1]}):", ""]
         lines += [
