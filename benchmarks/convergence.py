@@ -1,17 +1,27 @@
 """Grid convergence under the electrode (issue #21): the fixed electrode on graded grids of
-halving fine spacing, the paper's moving electrode, and today's uniform 33x33x65 beside them.
+halving fine spacing, the paper's moving electrode, and the uniform 33x33x65 beside them.
 
-    python benchmarks/convergence.py run --fine-mm 1 --seconds 3            # one fixed run
+    python benchmarks/convergence.py run --fine-mm 0.4 --seconds 3          # one fixed run
     python benchmarks/convergence.py run --fine-mm 0 --seconds 3            # uniform 33x33x65
-    python benchmarks/convergence.py run --fine-mm 1 --moving --seconds 12  # moving, 12.35 mm/s
+    python benchmarks/convergence.py run --fine-mm 0.8 --dt 0.015 --seconds 0.4  # dt study
+    python benchmarks/convergence.py run --moving --seconds 12              # moving, its grid
+    python benchmarks/convergence.py power --fine-mm 0.8 0.4 0.2 0.1        # step-1 power only
+    python benchmarks/convergence.py main-job                               # default vs uniform
     python benchmarks/convergence.py report                                 # table + plot
 
 ``run`` steps the fixed-electrode scene (current-density drive, 5.72e4 A/m^2 over the 1.17 mm
-disk, all effects) on a graded grid (``scene.resolution``: fine cells over the contact +- margin,
-3 mm deep, growth 1.25, cells <= 6.25 mm), stops at ``--seconds`` of simulated time or
-``--wall-limit`` seconds of wall time, and saves per-step records and crater profiles to
-``benchmarks/results/convergence_<tag>.npz``. ``report`` writes ``convergence.md`` and
-``convergence.png`` (crater profile per resolution) from every saved run.
+disk, all effects) on its graded grid (``scene.resolution``: fine cells over the contact + 2 mm,
+12 mm deep, growth 1.25, cells <= 6.25 mm) with ``fine_m`` set to ``--fine-mm``, or the
+``moving-electrode`` scene as shipped (50 W, 12.35 mm/s, its own grid); it stops at ``--seconds``
+of simulated time or ``--wall-limit`` seconds of wall time and saves per-step records and crater
+profiles to ``benchmarks/results/convergence_<tag>.npz``. Besides the step at which the tissue
+first passes 100 C and first cuts, each run records the time within the step at which the cut
+criterion is crossed: the largest strain energy on the front's nodes (the nodal W that drives the
+level set, PHYSICS.md section 4) reaching kappa, linear in time between the two steps that
+bracket it (likewise T passing 100 C). ``power`` measures the delivered power of the first step
+alone (electric only). ``main-job`` runs the ``default`` scene (50 W) on its grid and on the
+uniform 33x33x65, each in its own process (so each max RSS is its own). ``report`` writes
+``convergence.md`` and ``convergence.png`` (crater profile per resolution) from every saved run.
 """
 
 from __future__ import annotations
@@ -22,7 +32,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
+import json  # noqa: E402
 import math  # noqa: E402
+import multiprocessing as mp  # noqa: E402
 import resource  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
@@ -39,6 +51,7 @@ from diathermy.physics.contact_resistance import (  # noqa: E402
     equipotential_disk_resistance,
     uniform_flux_disk_resistance,
 )
+from diathermy.physics.levelset import tet_to_node  # noqa: E402
 from diathermy.physics.topology import contact_height  # noqa: E402
 from diathermy.scene import Scene, builtin_scene  # noqa: E402
 
@@ -47,19 +60,45 @@ PROFILE_TIMES_S = (3.0, 6.0, 12.0)
 """Simulated times at which the crater profile is saved."""
 PROFILE_HALF_WIDTH_M = 6e-3
 T_BOIL_K = 373.15
+T_INITIAL_K = 310.15
 
 
-def scene_for(fine_mm: float, *, moving: bool, drive: str = "current_density") -> Scene:
-    """The fixed (or moving) electrode scene on a graded grid of ``fine_mm`` (0: uniform)."""
-    base = builtin_scene("moving-electrode" if moving else "fixed-electrode").model_dump()
-    base["electrodes"][0]["drive"] = drive
-    base["resolution"] = {"fine_m": fine_mm * 1e-3} if fine_mm > 0 else None
+UNIFORM = (33, 33, 65)
+DT_S = 0.03
+
+
+def scene_for(fine_mm: float | None, *, moving: bool, dt_s: float = DT_S) -> Scene:
+    """The fixed electrode (current-density drive) with its resolution at ``fine_mm`` (0: uniform
+    33x33x65), or the moving electrode as shipped (``fine_mm`` None: its own grid)."""
+    scene = builtin_scene("moving-electrode" if moving else "fixed-electrode")
+    if fine_mm is not None and fine_mm <= 0:
+        scene = scene.on_uniform_grid(UNIFORM)
+    base = scene.model_dump()
+    if not moving:
+        base["electrodes"][0]["drive"] = "current_density"
+    if fine_mm is not None and fine_mm > 0:
+        base["resolution"] = {**base["resolution"], "fine_m": fine_mm * 1e-3}
+    base["dt_s"] = dt_s
     return Scene.model_validate(base)
 
 
-def tag_of(fine_mm: float, moving: bool) -> str:
+def tag_of(fine_mm: float | None, moving: bool, dt_s: float = DT_S) -> str:
     kind = "moving" if moving else "fixed"
-    return f"{kind}_{'uniform' if fine_mm <= 0 else f'{fine_mm:g}mm'}"
+    grid = "default" if fine_mm is None else "uniform" if fine_mm <= 0 else f"{fine_mm:g}mm"
+    return f"{kind}_{grid}" + ("" if dt_s == DT_S else f"_dt{dt_s:g}")
+
+
+def front_strain_energy(sim: Simulation) -> float:
+    """The largest nodal strain energy (J/m^3) on the front (phi <= 0 nodes): what starts a cut."""
+    W = sim.state["strain_energy"]
+    if not W.any():
+        return 0.0
+    n = sim.disc.n_nodes
+    W_nodes = tet_to_node(
+        W, sim.disc.mesh.tets, sim.disc.geom.volumes, n, include=~sim.state["removed"]
+    )
+    front = sim.state["level_set"] <= 0.0
+    return float(W_nodes[front].max()) if front.any() else 0.0
 
 
 def crater_profile(sim: Simulation, centre: tuple[float, float]) -> np.ndarray:
@@ -69,13 +108,25 @@ def crater_profile(sim: Simulation, centre: tuple[float, float]) -> np.ndarray:
     return sim.ctx.top_z - np.asarray(z)
 
 
-def run(fine_mm: float, *, moving: bool, seconds: float, wall_limit: float) -> Path:
-    scene = scene_for(fine_mm, moving=moving)
+def run(
+    fine_mm: float | None, *, moving: bool, seconds: float, wall_limit: float, dt_s: float = DT_S
+) -> Path:
+    scene = scene_for(fine_mm, moving=moving, dt_s=dt_s)
     t0 = time.perf_counter()
     sim = Simulation(scene)
     build_s = time.perf_counter() - t0
     centre = scene.electrodes[0].position_m
-    keys = ("time_s", "wall_s", "power_w", "t_max_k", "p_max_pa", "w_max", "cut_m3", "depth_m")
+    keys = (
+        "time_s",
+        "wall_s",
+        "power_w",
+        "t_max_k",
+        "p_max_pa",
+        "w_max",
+        "w_front",
+        "cut_m3",
+        "depth_m",
+    )
     rec: dict[str, list[float]] = {k: [] for k in keys}
     profiles: dict[str, np.ndarray] = {}
     n_steps = round(seconds / scene.dt_s)
@@ -91,6 +142,7 @@ def run(fine_mm: float, *, moving: bool, seconds: float, wall_limit: float) -> P
                 r.max_temperature_k,
                 r.max_pressure_pa,
                 r.max_strain_energy_j_per_m3,
+                front_strain_energy(sim),
                 r.cut_volume_m3,
                 r.crater_depth_m,
             ),
@@ -98,18 +150,22 @@ def run(fine_mm: float, *, moving: bool, seconds: float, wall_limit: float) -> P
         ):
             rec[k].append(float(v))
         for t in PROFILE_TIMES_S:
-            if abs(r.time_s - t) < 0.5 * scene.dt_s and not moving:
+            if abs(r.time_s - t) < 0.5 * scene.dt_s and not moving and dt_s == DT_S:
                 profiles[f"profile_{t:g}s"] = crater_profile(sim, centre)
         if time.perf_counter() - started > wall_limit:
             break
     if not moving:
         profiles["profile_end"] = crater_profile(sim, centre)
-    out = RESULTS / f"convergence_{tag_of(fine_mm, moving)}.npz"
+    out = RESULTS / f"convergence_{tag_of(fine_mm, moving, dt_s)}.npz"
+    res = scene.resolution
     np.savez(
         out,
         **{k: np.asarray(v) for k, v in rec.items()},
         **profiles,
-        fine_mm=fine_mm,
+        fine_mm=res.fine_m * 1e3 if res is not None else 0.0,
+        depth_mm=res.depth_m * 1e3 if res is not None else 0.0,
+        dt_s=scene.dt_s,
+        kappa=sim.tissue.damage_kappa_j_per_m3,
         moving=moving,
         shape=np.asarray(sim.grid.shape),
         n_nodes=sim.grid.n_nodes,
@@ -126,6 +182,18 @@ def _first(time_s: np.ndarray, mask: np.ndarray) -> float:
     return float(time_s[idx[0]]) if idx.size else math.nan
 
 
+def crossing(time_s: np.ndarray, values: np.ndarray, level: float, start: float) -> float:
+    """Time (s) at which ``values`` first reach ``level``, linear between the bracketing steps
+    (the state at t = 0 has ``start``); NaN if never."""
+    idx = np.flatnonzero(values >= level)
+    if not idx.size:
+        return math.nan
+    i = int(idx[0])
+    t0, v0 = (0.0, start) if i == 0 else (float(time_s[i - 1]), float(values[i - 1]))
+    t1, v1 = float(time_s[i]), float(values[i])
+    return t1 if v1 == v0 else t0 + (level - v0) / (v1 - v0) * (t1 - t0)
+
+
 def _at(time_s: np.ndarray, values: np.ndarray, t: float) -> float:
     idx = np.flatnonzero(np.abs(time_s - t) < 1e-6)
     return float(values[idx[0]]) if idx.size else math.nan
@@ -140,7 +208,11 @@ def summary(d: dict[str, np.ndarray]) -> dict[str, float]:
     return {
         "t_end": float(t[-1]),
         "t100": _first(t, d["t_max_k"] >= T_BOIL_K),
+        "t100_interp": crossing(t, d["t_max_k"], T_BOIL_K, T_INITIAL_K),
         "first_cut": _first(t, d["cut_m3"] > 0),
+        "cut_interp": crossing(t, d["w_front"], float(d["kappa"]), 0.0)
+        if "w_front" in d
+        else math.nan,
         "cut3": _at(t, d["cut_m3"], 3.0),
         "depth3": _at(t, d["depth_m"], 3.0),
         "cut6": _at(t, d["cut_m3"], 6.0),
@@ -162,6 +234,117 @@ def observed_order(a: float, b: float, c: float) -> float:
     return math.log2(abs(a - b) / abs(b - c))
 
 
+def power(fines_mm: list[float]) -> Path:
+    """Delivered power of the first step (electric only) per fine spacing; JSON in results."""
+    out = RESULTS / "convergence_power.json"
+    rows = json.loads(out.read_text()) if out.exists() else {}
+    for fine in fines_mm:
+        base = scene_for(fine, moving=False).model_dump()
+        base["effects"] = ["electric"]
+        sim = Simulation(Scene.model_validate(base))
+        t0 = time.perf_counter()
+        r = sim.step()
+        rows[f"{fine:g}"] = {
+            "fine_mm": fine,
+            "nodes": sim.grid.n_nodes,
+            "shape": list(sim.grid.shape),
+            "power_w": r.delivered_power_w,
+            "solve_s": time.perf_counter() - t0,
+        }
+        print(f"{fine:g} mm: {sim.grid.n_nodes} nodes, P = {r.delivered_power_w:.3f} W", flush=True)
+        del sim
+    out.write_text(json.dumps(rows, indent=1), encoding="utf-8")
+    return out
+
+
+def _main_job(uniform: bool, steps: int) -> dict[str, float]:
+    scene = builtin_scene("default")
+    if uniform:
+        scene = scene.on_uniform_grid(UNIFORM)
+    t0 = time.perf_counter()
+    sim = Simulation(scene)
+    build_s = time.perf_counter() - t0
+    walls, cut_at = [], math.nan
+    for _ in range(steps):
+        r = sim.step()
+        walls.append(r.wall_s)
+        if r.cut_volume_m3 > 0 and not math.isfinite(cut_at):
+            cut_at = r.time_s
+    return {
+        "grid": "x".join(map(str, sim.grid.shape)),
+        "graded": not sim.grid.is_uniform,
+        "nodes": sim.grid.n_nodes,
+        "steps": steps,
+        "build_s": build_s,
+        "total_s": time.perf_counter() - t0,
+        "step_median_s": float(np.median(walls)),
+        "step_p90_s": float(np.percentile(walls, 90)),
+        "first_cut_s": cut_at,
+        "cut_m3": r.cut_volume_m3,
+        "depth_m": r.crater_depth_m,
+        "max_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+    }
+
+
+def main_job(steps: int) -> Path:
+    """The ``default`` scene on its grid and on the uniform 33x33x65, one process each."""
+    ctx = mp.get_context("spawn")
+    runs = []
+    for uniform in (True, False):
+        with ctx.Pool(1, maxtasksperchild=1) as pool:
+            runs.append(pool.apply(_main_job, (uniform, steps)))
+        print(runs[-1], flush=True)
+    out = RESULTS / "convergence_main_job.json"
+    out.write_text(json.dumps(runs, indent=1), encoding="utf-8")
+    return out
+
+
+def _ref_powers() -> tuple[float, float]:
+    current = 5.72e4 * math.pi * 1.17e-3**2
+    eq_w = current**2 * equipotential_disk_resistance(0.33, 1.17e-3)
+    ref_w = current**2 * (
+        uniform_flux_disk_resistance(0.33, 1.17e-3)
+        + block_image_resistance(0.33, (0.2, 0.1, 0.1), (0.0, 0.0, 0.0), (0.1, 0.05))
+    )
+    return eq_w, ref_w
+
+
+def _grid_label(k: str, d: dict[str, np.ndarray]) -> str:
+    return f"{k.split('_', 1)[1]} ({'x'.join(str(n) for n in d['shape'])})"
+
+
+def _power_lines(ref_w: float) -> list[str]:
+    path = RESULTS / "convergence_power.json"
+    if not path.exists():
+        return []
+    rows = sorted(json.loads(path.read_text()).values(), key=lambda r: -r["fine_mm"])
+    finest = rows[-1]
+    lines = [
+        "",
+        "Delivered power of the first step alone (`power`, electric only, the same grids):",
+        "",
+        "| fine mm | grid | nodes | P W | P / ref | vs finest | vs 2x finer | electric s |",
+        "|---:|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    by_fine = {r["fine_mm"]: r for r in rows}
+    for r in rows:
+        half = by_fine.get(r["fine_mm"] / 2)
+        rel2 = f"{100 * (r['power_w'] / half['power_w'] - 1):+.1f} %" if half else "—"
+        lines.append(
+            f"| {r['fine_mm']:g} | {'x'.join(map(str, r['shape']))} | {r['nodes']} | "
+            f"{r['power_w']:.2f} | {r['power_w'] / ref_w:.3f} | "
+            f"{100 * (r['power_w'] / finest['power_w'] - 1):+.1f} % | {rel2} | {r['solve_s']:.1f} |"
+        )
+    halving = [r for r in rows if by_fine.get(r["fine_mm"] / 2) and by_fine.get(r["fine_mm"] / 4)]
+    for r in halving:
+        a, b, c = (by_fine[r["fine_mm"] / f]["power_w"] for f in (1, 2, 4))
+        lines.append(
+            f"\nObserved order of P over {r['fine_mm']:g} / {r['fine_mm'] / 2:g} / "
+            f"{r['fine_mm'] / 4:g} mm: {observed_order(a, b, c):.2f}."
+        )
+    return lines
+
+
 def report() -> None:
     import matplotlib
 
@@ -173,58 +356,66 @@ def report() -> None:
         for p in RESULTS.glob("convergence_*.npz")
     }
     fixed = sorted(
-        (k for k in runs if k.startswith("fixed")),
+        (k for k in runs if k.startswith("fixed") and float(runs[k]["dt_s"]) == DT_S),
         key=lambda k: -float(runs[k]["fine_mm"]) if float(runs[k]["fine_mm"]) > 0 else -1e9,
     )
-    moving = sorted(
-        (k for k in runs if k.startswith("moving")), key=lambda k: -float(runs[k]["fine_mm"])
+    dt_runs = sorted(
+        (k for k in runs if k.startswith("fixed")),
+        key=lambda k: (-float(runs[k]["fine_mm"]), -float(runs[k]["dt_s"])),
     )
-    current = 5.72e4 * math.pi * 1.17e-3**2
-    eq_w = current**2 * equipotential_disk_resistance(0.33, 1.17e-3)
-    ref_w = current**2 * (
-        uniform_flux_disk_resistance(0.33, 1.17e-3)
-        + block_image_resistance(0.33, (0.2, 0.1, 0.1), (0.0, 0.0, 0.0), (0.1, 0.05))
-    )
+    moving = sorted(k for k in runs if k.startswith("moving"))
+    eq_w, ref_w = _ref_powers()
+    sums = {k: summary(runs[k]) for k in runs}
     lines = [
         "# Grid convergence under the electrode (issue #21)",
         "",
-        "`python benchmarks/convergence.py run --fine-mm F --seconds S` per row, then "
-        "`python benchmarks/convergence.py report`. Fixed electrode, current-density drive "
-        "(5.72e4 A/m^2 over the 1.17 mm disk, I = 0.246 A), all effects, dt 0.03 s; graded grids: "
-        "fine cells over the contact +- 4.17 mm (radius + 3 mm margin), 3 mm deep, growth 1.25, "
-        "cells <= 6.25 mm. A run stops at its simulated target or its wall limit (t end). "
-        "Shared 2-core machine, single-threaded BLAS: read step times as ratios.",
+        "`python benchmarks/convergence.py run --fine-mm F --seconds S` per row, `power`, "
+        "`main-job`, then `report` (see the script's docstring). Fixed electrode: the "
+        "`fixed-electrode` scene with a current-density drive (5.72e4 A/m^2 over the 1.17 mm "
+        "disk, I = 0.246 A), all effects, dt 0.03 s, on its graded grid (fine cells over the "
+        "contact + 2 mm, 12 mm deep, growth 1.25, cells <= 6.25 mm) with the fine spacing of the "
+        "row; the shipped default is 0.4 mm. A run stops at its simulated target or its wall limit "
+        "(t end). Shared 2-core machine, single-threaded BLAS: read step times as ratios.",
         "",
         f"Resolved-contact references: the issue's equipotential disk I^2 / (4 sigma a) = "
         f"{eq_w:.2f} W; this drive's limit (uniform current density, 8 I^2 / (3 pi^2 sigma a), "
         f"plus the block's own resistance by images) = {ref_w:.2f} W (`P / ref` uses it).",
+        *_power_lines(ref_w),
         "",
-        "| grid | nodes | t end s | P W (step 1) | P / ref | t 100 C s | first cut s | cut 3 s mm^3 "
-        "| depth 3 s mm | cut 6 s mm^3 | depth 6 s mm | peak p kPa | median step s | max RSS MiB |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "Full runs. `step` columns: the first step at which T passes 100 C / the cut volume is "
+        "positive (whole steps of dt); `interp.`: the time within the step at which T_max "
+        "reaches 100 C / the largest nodal strain energy on the front reaches kappa (the cut "
+        "criterion), linear between the two steps that bracket it.",
+        "",
+        "| grid | nodes | t end s | P W (step 1) | P / ref | 100 C step s | 100 C interp. s "
+        "| first cut step s | first cut interp. s | cut 3 s mm^3 | depth 3 s mm | cut 6 s mm^3 "
+        "| depth 6 s mm | peak p kPa | median step s | max RSS MiB |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
-    sums = {k: summary(runs[k]) for k in runs}
     for k in fixed:
-        s, sh = sums[k], "x".join(str(n) for n in runs[k]["shape"])
+        s = sums[k]
         lines.append(
-            f"| {k.removeprefix('fixed_')} ({sh}) | {s['nodes']:.0f} | {s['t_end']:.2f} | "
+            f"| {_grid_label(k, runs[k])} | {s['nodes']:.0f} | {s['t_end']:.2f} | "
             f"{s['power0']:.2f} | {s['power0'] / ref_w:.3f} | {_fmt(s['t100'])} | "
-            f"{_fmt(s['first_cut'])} | {_fmt(s['cut3'], 1e9)} | {_fmt(s['depth3'], 1e3)} | "
-            f"{_fmt(s['cut6'], 1e9)} | {_fmt(s['depth6'], 1e3)} | {s['p_peak'] / 1e3:.0f} | "
-            f"{s['step_median']:.2f} | {s['rss']:.0f} |"
+            f"{_fmt(s['t100_interp'], 1.0, 3)} | {_fmt(s['first_cut'])} | "
+            f"{_fmt(s['cut_interp'], 1.0, 3)} | {_fmt(s['cut3'], 1e9)} | "
+            f"{_fmt(s['depth3'], 1e3)} | {_fmt(s['cut6'], 1e9)} | {_fmt(s['depth6'], 1e3)} | "
+            f"{s['p_peak'] / 1e3:.0f} | {s['step_median']:.2f} | {s['rss']:.0f} |"
         )
     graded = [k for k in fixed if float(runs[k]["fine_mm"]) > 0]
-    if graded:  # every run at the time the shortest one reached
-        tc = min(sums[k]["t_end"] for k in graded)
+    ends = sorted({round(sums[k]["t_end"], 6) for k in graded})
+    for tc in ends[:-1] if len(ends) > 1 else ends:  # each graded run's end, as far as others go
+        here = [k for k in fixed if sums[k]["t_end"] >= tc - 1e-6]
+        top = [k for k in graded if k in here][-1]
+        fin = _at(runs[top]["time_s"], runs[top]["cut_m3"], tc)
         lines += [
             "",
-            f"At t = {tc:.2f} s, the last time every graded run reached:",
+            f"At t = {tc:.2f} s (the runs that reached it; 'finest' is {top}):",
             "",
             "| grid | cut mm^3 | depth mm | cut / finest |",
             "|---|---:|---:|---:|",
         ]
-        fin = _at(runs[graded[-1]]["time_s"], runs[graded[-1]]["cut_m3"], tc)
-        for k in fixed:
+        for k in here:
             d = runs[k]
             cut, depth = _at(d["time_s"], d["cut_m3"], tc), _at(d["time_s"], d["depth_m"], tc)
             rel = cut / fin if fin else math.nan
@@ -232,53 +423,102 @@ def report() -> None:
                 f"| {k.removeprefix('fixed_')} | {_fmt(cut, 1e9)} | {_fmt(depth, 1e3)} | "
                 f"{_fmt(rel, 1.0, 3)} |"
             )
-        lines += [
-            "",
-            "First-cut times are whole steps (dt 0.03 s): 0.06 and 0.09 s differ by one step.",
-        ]
-    if len(graded) >= 3:
-        a, b, c = (sums[k] for k in graded[-3:])
-        lines += [
-            "",
-            f"Observed order over the three finest graded runs ({', '.join(graded[-3:])}): "
-            f"P {observed_order(a['power0'], b['power0'], c['power0']):.2f}, first cut "
-            f"{observed_order(a['first_cut'], b['first_cut'], c['first_cut']):.2f}, cut volume at 3 s "
-            f"{observed_order(a['cut3'], b['cut3'], c['cut3']):.2f} (NaN: a value missing or equal).",
-        ]
     if graded:
         finest = sums[graded[-1]]
         lines += ["", f"Relative to the finest run ({graded[-1]}):", ""]
-        lines += ["| grid | P | first cut | cut volume 3 s |", "|---|---:|---:|---:|"]
+        lines += [
+            "| grid | P | first cut (step) | first cut (interp.) | cut volume 3 s |",
+            "|---|---:|---:|---:|---:|",
+        ]
         for k in fixed:
             s = sums[k]
             rel = [
                 s[q] / finest[q] - 1 if finest[q] and math.isfinite(finest[q]) else math.nan
-                for q in ("power0", "first_cut", "cut3")
+                for q in ("power0", "first_cut", "cut_interp", "cut3")
             ]
             lines.append(
                 f"| {k.removeprefix('fixed_')} | "
                 + " | ".join(_fmt(v, 100, 1) + " %" for v in rel)
                 + " |"
             )
+    if len(graded) >= 3:
+        a, b, c = (sums[k] for k in graded[-3:])
+        lines += [
+            "",
+            f"Observed order over the three finest graded runs ({', '.join(graded[-3:])}): "
+            f"P {observed_order(a['power0'], b['power0'], c['power0']):.2f}, first cut (interp.) "
+            f"{observed_order(a['cut_interp'], b['cut_interp'], c['cut_interp']):.2f}, cut volume "
+            f"at 3 s {observed_order(a['cut3'], b['cut3'], c['cut3']):.2f} (NaN: a value missing "
+            "or equal).",
+        ]
+    studies = [k for k in dt_runs if float(runs[k]["dt_s"]) != DT_S]
+    if studies:
+        lines += [
+            "",
+            "Time step (same grid, dt halved): the step-resolved times move by whole steps, "
+            "the interpolated ones by what the time discretisation itself changes:",
+            "",
+            "| run | dt s | 100 C step s | 100 C interp. s | first cut step s | first cut interp. s |",
+            "|---|---:|---:|---:|---:|---:|",
+        ]
+        fines = {float(runs[k]["fine_mm"]) for k in studies}
+        for k in dt_runs:
+            if float(runs[k]["fine_mm"]) not in fines:
+                continue
+            s = sums[k]
+            lines.append(
+                f"| {k} | {float(runs[k]['dt_s']):g} | {_fmt(s['t100'], 1.0, 4)} | "
+                f"{_fmt(s['t100_interp'], 1.0, 4)} | {_fmt(s['first_cut'], 1.0, 4)} | "
+                f"{_fmt(s['cut_interp'], 1.0, 4)} |"
+            )
     if moving:
         lines += [
             "",
-            "Moving electrode (the paper's path at 12.35 mm/s, current-density drive):",
+            "Moving electrode: the `moving-electrode` scene as shipped (50 W power drive, "
+            "12.35 mm/s along the paper's path, all effects, its grid):",
             "",
-            "| grid | nodes | t end s | first cut s | cut at t end mm^3 | depth at t end mm "
-            "| cut 6 s mm^3 | depth 6 s mm | cut 12 s mm^3 | depth 12 s mm | peak p kPa "
-            "| median step s | max RSS MiB |",
-            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+            "| grid | nodes | t end s | first cut step s | first cut interp. s "
+            "| cut at t end mm^3 | depth at t end mm | cut 6 s mm^3 | depth 6 s mm | cut 12 s mm^3 "
+            "| depth 12 s mm | peak p kPa | median step s | max RSS MiB |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
         ]
         for k in moving:
             s = sums[k]
             lines.append(
-                f"| {k.removeprefix('moving_')} | {s['nodes']:.0f} | {s['t_end']:.2f} | "
-                f"{_fmt(s['first_cut'])} | {_fmt(float(runs[k]['cut_m3'][-1]), 1e9)} | "
+                f"| {_grid_label(k, runs[k])} | {s['nodes']:.0f} | {s['t_end']:.2f} | "
+                f"{_fmt(s['first_cut'])} | {_fmt(s['cut_interp'], 1.0, 3)} | "
+                f"{_fmt(float(runs[k]['cut_m3'][-1]), 1e9)} | "
                 f"{_fmt(float(runs[k]['depth_m'][-1]), 1e3)} | "
                 f"{_fmt(s['cut6'], 1e9)} | {_fmt(s['depth6'], 1e3)} | {_fmt(s['cut12'], 1e9)} | "
                 f"{_fmt(s['depth12'], 1e3)} | {s['p_peak'] / 1e3:.0f} | {s['step_median']:.2f} | "
                 f"{s['rss']:.0f} |"
+            )
+    main = RESULTS / "convergence_main_job.json"
+    if main.exists():
+        jobs = json.loads(main.read_text())
+        lines += [
+            "",
+            "The set-up's main job (`main-job`): the `default` scene (50 W, 3 s, all effects) on "
+            "its grid and on the uniform 33x33x65, one after the other in one command, each in "
+            "its own process:",
+            "",
+            "| grid | nodes | steps | first cut s | cut at end mm^3 | depth at end mm | median "
+            "step s | p90 step s | total s | max RSS MiB |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        ]
+        for j in jobs:
+            lines.append(
+                f"| {j['grid']}{' graded' if j['graded'] else ''} | {j['nodes']} | {j['steps']} | "
+                f"{_fmt(j['first_cut_s'])} | {_fmt(j['cut_m3'], 1e9)} | "
+                f"{_fmt(j['depth_m'], 1e3)} | {j['step_median_s']:.2f} | {j['step_p90_s']:.2f} | "
+                f"{j['total_s']:.0f} | {j['max_rss_mib']:.0f} |"
+            )
+        if len(jobs) == 2:
+            u, g = jobs
+            lines.append(
+                f"\nGraded / uniform: median step {g['step_median_s'] / u['step_median_s']:.2f}x, "
+                f"total {g['total_s'] / u['total_s']:.2f}x, max RSS "
+                f"{g['max_rss_mib'] / u['max_rss_mib']:.2f}x."
             )
     (RESULTS / "convergence.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
     fig, ax = plt.subplots(figsize=(7, 4))
@@ -287,8 +527,9 @@ def report() -> None:
         d = runs[k]
         key = "profile_3s" if "profile_3s" in d else "profile_end"
         when = "3 s" if key == "profile_3s" else f"t = {float(d['time_s'][-1]):.2f} s"
-        label = f"{k.removeprefix('fixed_')} ({when})"
-        ax.plot(xs, -np.asarray(d[key]) * 1e3, label=label)
+        ax.plot(xs, -np.asarray(d[key]) * 1e3, label=f"{k.removeprefix('fixed_')} ({when})")
+        if "profile_6s" in d:
+            ax.plot(xs, -np.asarray(d["profile_6s"]) * 1e3, "--", label=f"{k} (6 s)")
     ax.set_xlabel("x - x_contact (mm)")
     ax.set_ylabel("healthy surface below the top (mm)")
     ax.set_title("Crater profile through the fixed electrode")
@@ -302,14 +543,26 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run")
-    r.add_argument("--fine-mm", type=float, required=True, help="fine spacing; 0: uniform 33x33x65")
-    r.add_argument("--moving", action="store_true")
+    r.add_argument("--fine-mm", type=float, help="fine spacing; 0: uniform 33x33x65")
+    r.add_argument("--moving", action="store_true", help="the moving-electrode scene, its grid")
     r.add_argument("--seconds", type=float, default=3.0)
+    r.add_argument("--dt", type=float, default=DT_S, help="time step s (default 0.03)")
     r.add_argument("--wall-limit", type=float, default=3600.0)
+    pw = sub.add_parser("power")
+    pw.add_argument("--fine-mm", type=float, nargs="+", required=True)
+    mj = sub.add_parser("main-job")
+    mj.add_argument("--steps", type=int, default=100)
     sub.add_parser("report")
     a = ap.parse_args(argv)
     if a.cmd == "run":
-        run(a.fine_mm, moving=a.moving, seconds=a.seconds, wall_limit=a.wall_limit)
+        if a.fine_mm is None and not a.moving:
+            ap.error("run: --fine-mm is required for the fixed electrode")
+        fine = None if a.moving else a.fine_mm
+        run(fine, moving=a.moving, seconds=a.seconds, wall_limit=a.wall_limit, dt_s=a.dt)
+    elif a.cmd == "power":
+        power(a.fine_mm)
+    elif a.cmd == "main-job":
+        main_job(a.steps)
     else:
         report()
     return 0

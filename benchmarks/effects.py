@@ -55,9 +55,9 @@ def start_state(grid: tuple[int, int, int], checkpoint: Path) -> tuple[Simulatio
     """A simulation of the default scene in the cutting regime, and where it came from."""
     if checkpoint.exists():
         sim = Simulation.load_checkpoint(checkpoint)
-        if tuple(sim.scene.grid) == grid:
+        if sim.scene.resolution is None and tuple(sim.scene.grid) == grid:
             return sim, f"checkpoint {checkpoint.name} (t = {sim.time_s:.2f} s)"
-    sim = Simulation(builtin_scene("default").model_copy(update={"grid": grid}))
+    sim = Simulation(builtin_scene("default").on_uniform_grid(grid))
     t0 = time.perf_counter()
     while sim.step_index < 2000:
         rep = sim.step()

@@ -4,7 +4,8 @@
                                 [--scenes fixed-electrode moving-electrode-slow moving-electrode]
                                 [--model PATH] [--guard-tol 0.005] [--jobs 2]
 
-Per scene (each in its own process, ``--jobs`` at a time):
+Per scene (each in its own process, ``--jobs`` at a time; a graded built-in scene runs on its
+uniform ``grid``, 33x33x65, the shipped CNN's):
 1. the FEM engine runs the scene; at every step whose mechanics ran, the CNN alone (raw and
    Ritz-scaled), the CNN with its patch correction (the engine's default) and with patch and
    residual guard are evaluated on exactly that step's (p, phi, topology), and their strain
@@ -62,6 +63,8 @@ def run_scene(name: Any, steps: int, model: str | None, guard_tol: float) -> dic
     scene = scene.model_copy(  # the FEM reference solves in full every step
         update={"steps": steps, "solver": scene.solver.model_copy(update={"incremental": False})}
     )
+    if scene.resolution is not None:  # the CNN lives on a uniform grid: the shipped model's
+        scene = scene.on_uniform_grid(scene.grid)
     fem = Simulation(scene)
     t = fem.tissue
     model_path = model or str(default_model_path(scene.grid))

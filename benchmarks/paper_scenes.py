@@ -53,7 +53,7 @@ def contact_node(sim: Simulation, x: float, y: float) -> int:
 
 def run_scene(name: str, grid: tuple[int, int, int], steps: int, wall_limit: float) -> Path:
     """Step scene ``name`` and save its per-step records; returns the records' path."""
-    scene = builtin_scene(name).model_copy(update={"grid": grid, "steps": steps})
+    scene = builtin_scene(name).on_uniform_grid(grid).model_copy(update={"steps": steps})
     sim = Simulation(scene)
     p0 = sim.tissue.p_atm_pa
     rec: dict[str, list[float]] = {

@@ -232,7 +232,7 @@ def run_scene(
     indicator_iters: list[int],
 ) -> tuple[Recorder, list[float], float]:
     data = builtin_scene(name).model_dump()
-    data["grid"], data["steps"] = grid, steps
+    data["grid"], data["resolution"], data["steps"] = grid, None, steps
     scene = scene_from_dict(data)
     ref: list[Simulation] = []
     tis = scene.material

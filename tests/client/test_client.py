@@ -27,6 +27,7 @@ def test_sync_client_every_method(live: LiveServer, client: Client, tmp_path: Pa
     scenes = client.list_scenes()
     assert {"default", "moving-electrode", "coagulation"} <= set(scenes)
     assert isinstance(scenes["default"], Scene) and scenes["default"].grid == (33, 33, 65)
+    assert (scenes["default"].model_extra or {})["resolution"]["fine_m"] == 1e-3  # graded
 
     s = client.create_session("default", grid=SMALL_GRID)
     assert isinstance(s.info, SessionInfo) and s.info.grid.shape == SMALL_GRID

@@ -74,7 +74,10 @@ def test_scene_samples_record_the_given_scenes_as_their_own_scenarios(tmp_path: 
         np.testing.assert_array_equal(f["displacement"][:], g["displacement"][:])
     with pytest.raises(ValueError, match="one grid"):
         write_scene_samples(
-            [scenes[0], builtin_scene("fixed-electrode")], tmp_path / "x.h5", n_steps=1, log=False
+            [scenes[0], builtin_scene("fixed-electrode").on_uniform_grid((33, 33, 65))],
+            tmp_path / "x.h5",
+            n_steps=1,
+            log=False,
         )
 
 

@@ -86,6 +86,23 @@ def test_accuracy_budget_picks_cheapest_meeting_it(report, tmp_path):
         resolve_accuracy_budget(budgeted, out / "missing.json")
 
 
+def test_graded_scenes_are_put_on_a_uniform_grid_or_refused(report, tmp_path):
+    """The report compares uniform grids: a graded scene is refused by name, a variant's grid
+    replaces the scene's resolution, and a budget looks rows up by the grid the scene meshes."""
+    graded = tiny_scene(resolution={"fine_m": 2e-3, "max_cell_m": 5e-3})
+    with pytest.raises(SceneError, match="tiny.*graded"):
+        accuracy_cost_report([graded], [Variant("fem")], steps=1, out=tmp_path, progress=False)
+    assert Variant("coarse", grid=(5, 5, 9)).apply(graded, 3).node_shape == (5, 5, 9)
+    data = {"rows": [asdict(r) for r in report[1]]}
+    budgeted = graded.model_copy(
+        update={"accuracy_budget": AccuracyBudget(max_strain_energy_error=1.0)}
+    )
+    (tmp_path / "report.json").write_text(json.dumps(data))
+    shape = "x".join(map(str, graded.node_shape))
+    with pytest.raises(SceneError, match=f"no measurements for scene 'tiny' on grid {shape}"):
+        resolve_accuracy_budget(budgeted, tmp_path / "report.json")
+
+
 def test_accuracy_budget_ignores_runs_that_never_reached_the_mechanics(report):
     _, rows, _ = report
     measured = [asdict(r) for r in rows]

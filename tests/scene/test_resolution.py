@@ -24,22 +24,56 @@ def with_resolution(name: str, **res: object) -> Scene:
 
 
 def test_without_resolution_the_grid_is_the_uniform_one():
-    scene = builtin_scene("default")
+    scene = builtin_scene("default").on_uniform_grid((33, 33, 65))
     assert scene.resolution is None and "resolution" not in scene.model_dump()
     assert scene.node_grid() == Grid(scene.grid, size_m=scene.block_m)
     assert scene.node_shape == (33, 33, 65)
+    assert scene.model_copy(update={"resolution": None}) == Scene(name="default", **{
+        k: v for k, v in scene.model_dump().items() if k not in ("name", "resolution")
+    })  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("name", "fine_m", "depth_m"),
+    [
+        ("default", 1e-3, 3e-3),
+        ("fixed-electrode", 0.4e-3, 12e-3),
+        ("coagulation", 0.4e-3, 12e-3),
+        ("moving-electrode", 1e-3, 3e-3),
+        ("moving-electrode-slow", 1e-3, 3e-3),
+    ],
+)
+def test_builtin_scenes_are_graded_under_their_electrodes(name, fine_m, depth_m):
+    """Every built-in scene meshes a graded grid: cells of at most fine_m over the electrode's
+    contact (or path) + 2 mm, down to depth_m, at most 6.25 mm anywhere; its uniform grid stays
+    for the surrogates (``on_uniform_grid``)."""
+    scene = builtin_scene(name)
+    assert scene.resolution is not None
+    g = scene.node_grid()
+    assert not g.is_uniform and max(c.max() for c in g.cell_sizes_m()) <= 6.25e-3 + 1e-12
+    x, y, z = g.axes()
+    el = scene.electrodes[0]
+    cx, cy = el.position_m
+    under = (np.abs(x[:-1] - cx) < el.radius_m + 2e-3) & (np.abs(x[1:] - cx) < el.radius_m + 2e-3)
+    assert np.diff(x)[under].max() <= fine_m + 1e-12
+    inside = z[:-1] >= scene.block_m[2] - depth_m - 1e-12
+    assert np.diff(z)[inside].max() <= fine_m + 1e-12
+    assert np.diff(z)[~inside].min() > fine_m  # below the working region the cells grow
+    uniform = scene.on_uniform_grid((9, 9, 17))
+    assert uniform.resolution is None and uniform.node_shape == (9, 9, 17)
+    assert uniform.model_copy(update={"grid": scene.grid, "resolution": scene.resolution}) == scene
 
 
 def test_default_region_covers_the_contact_or_the_path():
     fixed = with_resolution("fixed-electrode")
     lo, hi = working_region(fixed.resolution, fixed.block_m, fixed.electrodes)
-    reach = 1.17e-3 + 3e-3
-    assert np.allclose(lo, (0.1 - reach, 0.05 - reach, 0.1 - 3e-3))
+    reach = 1.17e-3 + 2e-3
+    assert np.allclose(lo, (0.1 - reach, 0.05 - reach, 0.1 - 12e-3))
     assert np.allclose(hi, (0.1 + reach, 0.05 + reach, 0.1))
     moving = with_resolution("moving-electrode", fine_m=2e-3)
     lo, hi = working_region(moving.resolution, moving.block_m, moving.electrodes)
     wp = np.asarray(moving.electrodes[0].path.waypoints_m)
-    assert np.all(wp.min(axis=0) - 4e-3 >= lo[:2]) and np.all(wp.max(axis=0) + 4e-3 <= hi[:2])
+    assert np.all(wp.min(axis=0) - 3e-3 >= lo[:2]) and np.all(wp.max(axis=0) + 3e-3 <= hi[:2])
     g = moving.node_grid()
     x = g.axes()[0]
     assert np.diff(x)[(x[:-1] >= wp[0, 0]) & (x[1:] <= wp[-1, 0])].max() <= 2e-3 + 1e-12

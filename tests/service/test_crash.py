@@ -31,7 +31,7 @@ from diathermy.service.encoding import decode_array, unpack
 from tests.service.conftest import TOKEN_A, assert_ended, descendants, free_port
 
 ROOT = Path(__file__).resolve().parents[2]
-GRID = [9, 9, 17]
+GRID = (9, 9, 17)
 HEADERS = {"Authorization": f"Bearer {TOKEN_A}"}
 Command = tuple[str, Any]  # ("step", None) or ("electrode", {changes})
 
@@ -89,9 +89,7 @@ class Server:
 
 
 def scene_body() -> dict[str, Any]:
-    data = builtin_scene("default").model_dump(mode="json")
-    data["grid"] = GRID
-    return {"scene": data}
+    return {"scene": builtin_scene("default").on_uniform_grid(GRID).model_dump(mode="json")}
 
 
 def server_fields(api: httpx.Client, sid: str, names: list[str]) -> dict[str, np.ndarray]:

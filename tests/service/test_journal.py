@@ -12,7 +12,7 @@ import pytest
 
 from diathermy.engine.simulation import Simulation
 from diathermy.errors import CheckpointError
-from diathermy.scene import Scene, builtin_scene, scene_from_dict
+from diathermy.scene import Scene, builtin_scene
 from diathermy.service import engine_ops as ops
 from diathermy.service.engine import DefaultEngine
 from diathermy.service.engine_process import RemoteSim
@@ -21,9 +21,7 @@ from diathermy.service.registry import SessionRecord, SessionRegistry
 
 
 def small_scene() -> Scene:
-    data = builtin_scene("default").model_dump()
-    data["grid"] = (5, 5, 9)
-    return scene_from_dict(data)
+    return builtin_scene("default").on_uniform_grid((5, 5, 9))
 
 
 def run(reg: SessionRegistry, rec: SessionRecord, plan: list[object]) -> None:

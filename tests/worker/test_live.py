@@ -97,8 +97,7 @@ def test_dataset_then_training_to_an_active_model(
     assert path.is_file()
 
     # a session on that grid runs its mechanics with the model through the hybrid-CNN backend
-    scene = builtin_scene("default").model_dump(mode="json")
-    scene["grid"] = [5, 5, 9]
+    scene = builtin_scene("default").on_uniform_grid((5, 5, 9)).model_dump(mode="json")
     scene["mechanics"] = {**scene["mechanics"], "backend": "cnn", "model": str(path)}
     session = api.post("/v1/sessions", json={"scene": scene})
     assert session.status_code == 201, session.text

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from diathermy.errors import SceneError
 from diathermy.physics.strain_energy import relative_strain_energy_error
 from diathermy.report.measure import RunRecord, load_fields, run_variant
 from diathermy.report.variants import Variant, reference_for
@@ -213,7 +214,17 @@ def accuracy_cost_report(
     on_row: Callable[[Row], None] | None = None,
     command: str | None = None,
 ) -> list[Row]:
-    """Run every (scene, variant) and its references; write report.md, report.csv, report.json, plots."""
+    """Run every (scene, variant) and its references; write report.md, report.csv, report.json, plots.
+
+    The scenes are on uniform grids (the surrogates' and the coarse variant's); a graded scene
+    (``resolution``) is refused: put it on one with ``Scene.on_uniform_grid``.
+    """
+    for scene in scenes:
+        if scene.resolution is not None:
+            raise SceneError(
+                f"accuracy-cost compares uniform grids; scene {scene.name!r} is graded "
+                "(resolution): give it a uniform grid (--grid NZxNYxNX)"
+            )
     out.mkdir(parents=True, exist_ok=True)
     rows: list[Row] = []
     curves: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}

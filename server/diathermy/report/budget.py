@@ -32,6 +32,7 @@ def cheapest_within(
     if not rows:
         raise SceneError(
             f"accuracy_budget: the accuracy report has no measurements for scene {scene!r}"
+            + (f" on grid {grid}" if grid is not None else "")
         )
     # a run that never reached the mechanics has error 0 by construction: no evidence at all
     rows = [r for r in rows if r.get("compared_steps", 1) > 0]
@@ -64,7 +65,7 @@ def resolve_accuracy_budget(scene: Scene, report_path: str | Path | None = None)
     if scene.accuracy_budget is None:
         return scene
     path = report_path or PACKAGED_REPORT
-    grid = "x".join(str(n) for n in scene.grid)
+    grid = "x".join(str(n) for n in scene.node_shape)
     row = cheapest_within(
         load_report(path),
         scene=scene.name,

@@ -37,7 +37,7 @@ def _cmd(args: argparse.Namespace) -> int:
     scenes = [resolve_scene(s) for s in args.scenes.split(",")]
     if args.grid:
         g = parse_grid(args.grid)
-        scenes = [s.model_copy(update={"grid": g}) for s in scenes]
+        scenes = [s.on_uniform_grid(g) for s in scenes]
     variants = default_variants(_models(args.model or []))
     if args.coarse_grid:
         cg = parse_grid(args.coarse_grid)
@@ -77,7 +77,12 @@ def add_report_parser(subparsers: Any) -> None:
         default="fixed-electrode,moving-electrode-slow",
         help="comma-separated scene names or files",
     )
-    s.add_argument("--grid", help="run the scenes on this grid (NZxNYxNX) instead of their own")
+    s.add_argument(
+        "--grid",
+        default="33x33x65",
+        help="the uniform grid (NZxNYxNX) the scenes run on (default 33x33x65, the shipped "
+        "surrogates'; the report compares uniform grids)",
+    )
     s.add_argument(
         "--coarse-grid", default=None, help="grid of the coarse-grid variant (default 17x17x33)"
     )

@@ -33,8 +33,8 @@ class Variant:
         """The scene as this variant runs it."""
         data = scene.model_dump()
         data["steps"] = steps
-        if self.grid is not None:
-            data["grid"] = list(self.grid)
+        if self.grid is not None:  # a uniform grid replaces a graded scene's resolution
+            data["grid"], data["resolution"] = list(self.grid), None
         data["solver"] = {
             **data["solver"],
             "coupling": self.coupling,

@@ -6,16 +6,32 @@ from collections.abc import Callable
 
 from diathermy.errors import SceneError
 from diathermy.scene.models import Electrode, ElectrodePath, Scene
+from diathermy.scene.resolution import Resolution
 
 MOVING_PATH_M = [(0.04, 0.05), (0.07, 0.035), (0.10, 0.06), (0.13, 0.04), (0.16, 0.05)]
 """A curvilinear path on the top surface (x, y) in m, ~14 cm long: 12 s at 12.35 mm/s."""
+
+
+FIXED_RESOLUTION = Resolution()
+"""The fixed electrode's grid: 0.4 mm cells over the contact + 2 mm, 12 mm deep (the crater's
+depth at 6 s with margin), growing by 1.25 to 6.25 mm (benchmarks/results/convergence.md)."""
+
+MOVING_RESOLUTION = Resolution(fine_m=1e-3, depth_m=3e-3)
+"""The moving electrodes' grid: 1 mm cells over the path's bounding box + 2 mm, 3 mm deep. The
+whole path is the working region, so finer cells cost nodes fast (0.5 mm: 1.3 M nodes)."""
+
+MAIN_JOB_RESOLUTION = Resolution(fine_m=1e-3, depth_m=3e-3)
+"""The default main job's grid: 1 mm over the contact + 2 mm, 3 mm deep, so that the set-up's main
+job stays a few minutes on 2 cores (12 mm deep: 2.5x the uniform 33x33x65's time, measured)."""
 
 
 def _fixed() -> Scene:
     return Scene(
         name="fixed-electrode",
         description="The paper's fixed-electrode scenario: a 50 W ball electrode held at the "
-        "centre of the top surface for 12 s (400 steps of 0.03 s), all effects.",
+        "centre of the top surface for 12 s (400 steps of 0.03 s), all effects, on a graded "
+        "grid (0.4 mm under the electrode).",
+        resolution=FIXED_RESOLUTION,
         steps=400,
     )
 
@@ -25,8 +41,10 @@ def _moving() -> Scene:
     return Scene(
         name="moving-electrode",
         description="The paper's moving-electrode scenario: a 50 W ball electrode drawn along a "
-        "curvilinear path at 12.35 mm/s for 12 s, all effects.",
+        "curvilinear path at 12.35 mm/s for 12 s, all effects, on a graded grid (1 mm along "
+        "the path).",
         electrodes=[Electrode(position_m=MOVING_PATH_M[0], path=path)],
+        resolution=MOVING_RESOLUTION,
         steps=400,
     )
 
@@ -44,10 +62,12 @@ def _moving_slow() -> Scene:
     )
     return Scene(
         name="moving-electrode-slow",
-        description="The moving-electrode path at 2 mm/s, slow enough to vaporize and cut on the "
-        "default 33x33x65 grid (the paper's 12.35 mm/s never boils there): 50 W, 12 s, all "
-        "effects. The held-out moving scene of the surrogate benchmarks.",
+        description="The moving-electrode path at 2 mm/s, slow enough to vaporize and cut even on "
+        "the uniform 33x33x65 grid (the paper's 12.35 mm/s never boils there): 50 W, 12 s, all "
+        "effects, on a graded grid (1 mm along the path); the surrogate benchmarks run it on "
+        "its uniform grid.",
         electrodes=[Electrode(position_m=MOVING_PATH_M[0], path=path)],
+        resolution=MOVING_RESOLUTION,
         steps=400,
     )
 
@@ -58,6 +78,7 @@ def _coagulation() -> Scene:
         description="Electric and thermal only (no vaporization, no mechanics): a 20 W "
         "electrode coagulating for 6 s, with the Arrhenius burn map.",
         electrodes=[Electrode(power_w=20.0)],
+        resolution=FIXED_RESOLUTION,
         effects=["electric", "thermal", "thermal_damage"],
         steps=200,
     )
@@ -66,8 +87,9 @@ def _coagulation() -> Scene:
 def _default() -> Scene:
     return Scene(
         name="default",
-        description="The README's main job: the fixed-electrode scene on the 33x33x65 grid, "
-        "3 s (100 steps), all effects.",
+        description="The README's main job: the fixed-electrode scene for 3 s (100 steps), all "
+        "effects, on a graded grid at 1 mm under the electrode (a few minutes on 2 cores).",
+        resolution=MAIN_JOB_RESOLUTION,
         steps=100,
     )
 

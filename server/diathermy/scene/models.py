@@ -255,6 +255,12 @@ class Scene(_Model):
             return Grid(self.grid, size_m=self.block_m)
         return graded_grid(self.resolution, self.block_m, self.electrodes)
 
+    def on_uniform_grid(self, shape: tuple[int, int, int]) -> Scene:
+        """This scene on a uniform grid of ``shape`` nodes (nz, ny, nx): its resolution dropped."""
+        data = self.model_dump()
+        data["grid"], data["resolution"] = tuple(shape), None
+        return type(self).model_validate(data)
+
     @property
     def node_shape(self) -> tuple[int, int, int]:
         """Nodes (nz, ny, nx) of ``node_grid()``."""

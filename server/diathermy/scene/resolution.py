@@ -33,7 +33,7 @@ class Resolution(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     fine_m: Annotated[float, Field(ge=2e-5, le=0.05, allow_inf_nan=False)] = Field(
-        0.5e-3, description="largest cell over the working region, m"
+        0.4e-3, description="largest cell over the working region, m"
     )
     growth: Annotated[float, Field(ge=1.0, le=2.0, allow_inf_nan=False)] = Field(
         1.25, description="largest ratio of neighbouring cells away from the working region"
@@ -42,10 +42,10 @@ class Resolution(BaseModel):
         6.25e-3, description="largest cell anywhere, m"
     )
     margin_m: Annotated[float, Field(ge=0, le=0.1, allow_inf_nan=False)] = Field(
-        3e-3, description="default working region: sideways margin beyond the contacts, m"
+        2e-3, description="default working region: sideways margin beyond the contacts, m"
     )
     depth_m: Annotated[float, Field(gt=0, le=1.0, allow_inf_nan=False)] = Field(
-        3e-3, description="default working region: depth below the top surface, m"
+        12e-3, description="default working region: depth below the top surface, m"
     )
     region_m: tuple[Point3, Point3] | None = Field(
         None,

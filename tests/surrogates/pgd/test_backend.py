@@ -91,3 +91,7 @@ def test_pgd_build_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> No
     assert "unknown training-manifold keys" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["pgd-build", str(path), "--out", str(out), "--modes", "51"])
+    graded = tmp_path / "graded.json"  # the default scene is graded: a PGD grid must be given
+    graded.write_text(json.dumps({k: v for k, v in cfg.items() if k != "grid"}))
+    assert main(["pgd-build", str(graded), "--out", str(out)]) == 2
+    assert "graded grid (resolution)" in capsys.readouterr().err

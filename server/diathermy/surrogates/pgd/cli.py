@@ -60,6 +60,11 @@ def _cmd_pgd_build(args: argparse.Namespace) -> int:
     if args.modes is not None:
         manifold_data["n_modes"] = args.modes
     manifold = TrainingManifold.from_dict(manifold_data)
+    if "grid" not in cfg and scene.resolution is not None:
+        raise SceneError(
+            f"scene {scene.name!r} is on a graded grid (resolution) and a PGD model lives on a "
+            "uniform one: give the build config a 'grid' (nodes nz, ny, nx)"
+        )
     model = build_model(
         manifold,
         grid,

@@ -1,0 +1,56 @@
+"""A tiny run of benchmarks/convergence.py: its scene family, its sub-step crossing times, and a
+run -> report round trip on a coarse graded grid."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def bench() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("convergence", ROOT / "benchmarks/convergence.py")
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_crossing_is_exact_for_a_linear_rise(bench: ModuleType) -> None:
+    t = np.array([0.03, 0.06, 0.09, 0.12])
+    v = 310.0 + 600.0 * t  # passes 373.15 K at t = 0.10525 s, inside the 4th step
+    assert bench.crossing(t, v, 373.15, 310.0) == pytest.approx(63.15 / 600.0, rel=1e-12)
+    assert bench.crossing(t, v, 320.0, 310.0) == pytest.approx(10.0 / 600.0, rel=1e-12)
+    assert math.isnan(bench.crossing(t, v, 1e4, 310.0))
+
+
+def test_scene_family(bench: ModuleType) -> None:
+    fine = bench.scene_for(0.8, moving=False, dt_s=0.015)
+    assert fine.resolution.fine_m == pytest.approx(0.8e-3) and fine.dt_s == 0.015
+    assert fine.electrodes[0].drive == "current_density"
+    assert fine.resolution.depth_m == bench.builtin_scene("fixed-electrode").resolution.depth_m
+    uniform = bench.scene_for(0, moving=False)
+    assert uniform.resolution is None and uniform.node_shape == (33, 33, 65)
+    moving = bench.scene_for(None, moving=True)
+    assert moving == bench.builtin_scene("moving-electrode")  # as shipped: 50 W, its grid
+    assert bench.tag_of(0.8, False, 0.015) == "fixed_0.8mm_dt0.015"
+    assert bench.tag_of(None, True) == "moving_default"
+
+
+def test_run_then_report(bench: ModuleType, tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.setattr(bench, "RESULTS", tmp_path)
+    out = bench.run(4.0, moving=False, seconds=0.09, wall_limit=60.0)
+    d = np.load(out)
+    assert d["time_s"].size == 3 and float(d["fine_mm"]) == 4.0
+    assert d["w_front"].shape == d["cut_m3"].shape and float(d["kappa"]) > 0
+    bench.report()
+    text = (tmp_path / "convergence.md").read_text()
+    assert "| 4mm (" in text and "42.52 W" in text
+    assert (tmp_path / "convergence.png").stat().st_size > 0
