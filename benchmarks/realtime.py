@@ -1,6 +1,6 @@
 """Real time (issue #25): what a cutting step costs, full against incremental, one command.
 
-    python benchmarks/realtime.py run [--grids 0 0.5] [--steps N]
+    python benchmarks/realtime.py run [--grids 0 0.4] [--steps N]
     python benchmarks/realtime.py solvers [--grids 0 0.5] [--steps N] [--rounds N]
 
 ``run``: the fixed-electrode scene (as below) from the checkpoint two steps after the first cut,
@@ -42,6 +42,7 @@ Writes ``benchmarks/results/realtime_solvers.md``.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -180,14 +181,17 @@ def run_modes(path: Path, fine_mm: float, steps: int) -> dict[str, dict[str, lis
 
 
 def write_run(results: dict, a: argparse.Namespace, started: str, dt_s: float) -> None:
+    grids = " ".join(f"{g:g}" for g in a.grids)
+    load = os.getloadavg()
     lines = [
         "# Real time: a cutting step, full against incremental",
         "",
-        f"`python benchmarks/realtime.py run --steps {a.steps}` (started {started}): the "
-        "fixed-electrode scene (current-density drive) from the checkpoint two steps after the "
-        f"first cut, {a.steps} steps per mode, the modes stepped in lockstep. A short run on a "
-        "shared 2-core machine with other sessions' jobs beside it (load 3-5): wall times are "
-        "inflated alike for every mode, read the ratios. Errors are against the full mode at "
+        f"`python benchmarks/realtime.py run --grids {grids} --steps {a.steps}` (started "
+        f"{started}): the fixed-electrode scene (current-density drive) from the checkpoint two "
+        f"steps after the first cut, {a.steps} steps per mode, the modes stepped in lockstep. A "
+        "short run on a 2-core machine that other jobs may share (load average when written: "
+        f"{load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f}): wall times are inflated alike for "
+        "every mode, read the ratios. Errors are against the full mode at "
         "the same step (strain energy: the paper's relative L2 over tets).",
         "",
         "| grid | mode | median step s | p90 step s | x full | real-time factor | local mechanics steps | max SE error | mean SE error | max T error K | cut volume vs full |",
@@ -234,7 +238,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run", help="full vs incremental per step, with the errors")
-    r.add_argument("--grids", nargs="+", type=float, default=[0.0, 0.5], help="0: uniform")
+    r.add_argument(
+        "--grids", nargs="+", type=float, default=[0.0, 0.4], help="fine mm; 0: uniform 33x33x65"
+    )
     r.add_argument("--steps", type=int, default=12)
     s = sub.add_parser("solvers", help="per-saving cost of a cutting step")
     s.add_argument("--grids", nargs="+", type=float, default=[0.0, 0.5], help="0: uniform")
