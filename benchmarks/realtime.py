@@ -56,7 +56,6 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from convergence import scene_for  # noqa: E402
 
-from diathermy.engine import checkpoint as persistence  # noqa: E402
 from diathermy.engine.backends import fem_of  # noqa: E402
 from diathermy.engine.simulation import Simulation  # noqa: E402
 from diathermy.physics.mechanics import DEFAULT_AMG_OPTIONS  # noqa: E402
@@ -112,20 +111,15 @@ def configure(sim: Simulation, variant: str) -> None:
 def load_as(path: Path, **mechanics: Any) -> Simulation:
     """The checkpoint continued with ``solver.incremental`` and mechanics settings changed
     (``incremental`` among them), exactly as ``Simulation.load_checkpoint`` continues it."""
-    saved = persistence.read_checkpoint(path)
-    data = saved.scene.model_dump()
-    data["solver"]["incremental"] = mechanics.pop("incremental", True)
-    data["mechanics"].update(mechanics)
-    sim = Simulation(Scene.model_validate(data))
-    st = sim.state
-    st.step, st.time_s, st.arrays = saved.step, saved.time_s, saved.arrays
-    st.energy, st.overrides = saved.energy, saved.overrides
-    sim.restore_solver_state(
-        saved.solver,
-        steps_since_reinit=saved.steps_since_reinit,
-        mechanics_current=saved.mechanics_current,
-    )
-    return sim
+    incremental = mechanics.pop("incremental", True)
+
+    def variant(scene: Scene) -> Scene:
+        data = scene.model_dump()
+        data["solver"]["incremental"] = incremental
+        data["mechanics"].update(mechanics)
+        return Scene.model_validate(data)
+
+    return Simulation.load_checkpoint(path, scene=variant)
 
 
 def run_variant(path: Path, variant: str, steps: int) -> list[dict[str, float]]:

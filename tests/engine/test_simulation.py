@@ -119,6 +119,27 @@ def test_checkpoint_restore_continues_bit_for_bit(tmp_path):
     assert sim.state.energy == back.state.energy
 
 
+def test_checkpoint_continues_under_a_changed_scene(tmp_path):
+    """Settings may change on load (the real-time benchmark compares modes from one state): the
+    state is the saved one, the scene the mapped one; a different grid is refused."""
+    sim = Simulation(tiny_scene(effects=["electric", "thermal"]))
+    sim.run(5)
+    path = sim.save_checkpoint(tmp_path / "c.h5")
+
+    def full(scene):
+        data = scene.model_dump()
+        data["solver"]["incremental"] = False
+        return type(scene).model_validate(data)
+
+    back = Simulation.load_checkpoint(path, scene=full)
+    assert back.scene.solver.incremental is False and back.step_index == 5
+    for name, arr in sim.state.arrays.items():
+        assert np.array_equal(arr, back.state.arrays[name]), name
+    other = lambda scene: scene.model_copy(update={"grid": (5, 5, 9)})  # noqa: E731
+    with pytest.raises(CheckpointError, match="do not match"):
+        Simulation.load_checkpoint(path, scene=other)
+
+
 def test_bad_checkpoints_get_clear_errors(tmp_path):
     junk = tmp_path / "junk.h5"
     junk.write_bytes(b"\x89HDF not really")

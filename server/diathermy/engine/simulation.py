@@ -236,11 +236,18 @@ class Simulation:
 
     @classmethod
     def load_checkpoint(
-        cls, path: str | Path, *, models: ModelResolver | None = None
+        cls,
+        path: str | Path,
+        *,
+        models: ModelResolver | None = None,
+        scene: Callable[[Scene], Scene] | None = None,
     ) -> Simulation:
-        """A simulation that continues a checkpoint exactly; bad files raise ``CheckpointError``."""
+        """A simulation that continues a checkpoint exactly; bad files raise ``CheckpointError``.
+
+        ``scene``: maps the saved scene to the one to continue under (other solver or mechanics
+        settings on the same grid, e.g. to compare modes from one state); None keeps it."""
         saved = persistence.read_checkpoint(path)
-        sim = cls(saved.scene, models=models)
+        sim = cls(saved.scene if scene is None else scene(saved.scene), models=models)
         persistence.check_fields(path, sim.state.arrays, saved.arrays)
         st = sim.state
         st.step, st.time_s, st.arrays = saved.step, saved.time_s, saved.arrays
