@@ -29,6 +29,7 @@ from diathermy.engine.electrodes import path_polyline  # noqa: E402
 from diathermy.fem.edges import edge_stiffness  # noqa: E402
 from diathermy.fem.geometry import structured_geometry  # noqa: E402
 from diathermy.mesh import Grid, build_tet_mesh  # noqa: E402
+from diathermy.physics.contact_load import contact_weights  # noqa: E402
 from diathermy.physics.contact_resistance import (  # noqa: E402
     block_image_resistance,
     equipotential_disk_resistance,
@@ -38,7 +39,6 @@ from diathermy.physics.electric import (  # noqa: E402
     DrivenPotential,
     ElectrodeDrive,
     PotentialSolver,
-    contact_weights,
 )
 from diathermy.runtime import configure_threads  # noqa: E402
 from diathermy.scene.builtin import MOVING_PATH_M  # noqa: E402

@@ -10,13 +10,12 @@ from diathermy.fem.edges import edge_stiffness
 from diathermy.fem.geometry import element_geometry, structured_geometry
 from diathermy.fem.scalar import surface_load, volume_load
 from diathermy.mesh import Grid, TetMesh, build_tet_mesh
+from diathermy.physics.contact_load import contact_weights, disk_quadrature
 from diathermy.physics.electric import (
     DrivenPotential,
     ElectrodeDrive,
     PotentialSolver,
-    contact_weights,
     delivered_power,
-    disk_quadrature,
     joule_heat,
 )
 

@@ -7,7 +7,8 @@ import pytest
 
 from diathermy.fem.geometry import structured_geometry
 from diathermy.mesh import Grid, build_tet_mesh
-from diathermy.physics.electric import ElectrodeDrive, contact_weights
+from diathermy.physics.contact_load import contact_weights
+from diathermy.physics.electric import ElectrodeDrive
 from diathermy.physics.electrothermal import ElectroThermal
 
 A_M = 1.17e-3

@@ -10,17 +10,13 @@ from scipy import integrate, special
 from diathermy.fem.edges import edge_stiffness
 from diathermy.fem.geometry import structured_geometry
 from diathermy.mesh import Grid, TetMesh, build_tet_mesh
+from diathermy.physics.contact_load import contact_weights
 from diathermy.physics.contact_resistance import (
     block_image_resistance,
     equipotential_disk_resistance,
     uniform_flux_disk_resistance,
 )
-from diathermy.physics.electric import (
-    DrivenPotential,
-    ElectrodeDrive,
-    PotentialSolver,
-    contact_weights,
-)
+from diathermy.physics.electric import DrivenPotential, ElectrodeDrive, PotentialSolver
 
 A_M, J0, SIGMA = 1.17e-3, 5.72e4, 0.33
 CENTRE = (0.1, 0.05, 0.1)

@@ -10,13 +10,8 @@ from diathermy.fem.edges import edge_stiffness
 from diathermy.fem.geometry import structured_geometry
 from diathermy.mesh import Grid, build_tet_mesh
 from diathermy.mesh.grading import graded_axis
-from diathermy.physics.electric import (
-    DrivenPotential,
-    ElectrodeDrive,
-    PotentialSolver,
-    contact_weights,
-    joule_heat,
-)
+from diathermy.physics.contact_load import contact_weights
+from diathermy.physics.electric import DrivenPotential, ElectrodeDrive, PotentialSolver, joule_heat
 from diathermy.physics.heat_operator import heat_mesh
 from diathermy.physics.thermal import HeatStepper
 from tests.physics.convective_column import T_INF_K, T_INITIAL_K, column_max_error

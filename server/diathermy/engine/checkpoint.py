@@ -30,7 +30,7 @@ from diathermy.engine.state import SimulationState
 from diathermy.errors import CheckpointError, MeshError
 from diathermy.fem.solvers import ReuseState
 from diathermy.mesh.grid_attrs import grid_attrs, grid_from_attrs
-from diathermy.physics.electric import contact_weights
+from diathermy.physics.contact_load import contact_weights
 from diathermy.physics.incremental_mechanics import IncrementalFEMBackend
 from diathermy.physics.mechanics_backend import HierarchyOrigin
 from diathermy.physics.topology import evaluate_topology

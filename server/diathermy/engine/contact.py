@@ -9,7 +9,8 @@ from diathermy.engine.discretization import Discretization
 from diathermy.engine.electrodes import ElectrodePose
 from diathermy.engine.state import ContactKey, SimulationState
 from diathermy.errors import SceneError
-from diathermy.physics.electric import ContactWeights, ElectrodeDrive, contact_weights
+from diathermy.physics.contact_load import ContactWeights, contact_weights
+from diathermy.physics.electric import ElectrodeDrive
 from diathermy.physics.topology import REMOVED_FRACTION, contact_height
 
 

@@ -32,72 +32,7 @@ from diathermy.fem.edges import EdgeStiffness, LaplacianPattern, laplacian_patte
 from diathermy.fem.multigrid import SCALAR_AMG_OPTIONS, scaled_candidates, unit_diagonal
 from diathermy.fem.solvers import KrylovSolver, ReuseState, SolveStats
 from diathermy.mesh import TetMesh
-
-
-@dataclass(frozen=True)
-class ContactWeights:
-    """The electrode's contact disk as a nodal load per unit current density.
-
-    Attributes:
-        weights: int over the disk of each shape function (n_nodes,) in m^2.
-        area_m2: disk area inside the block (= weights.sum()), in m^2.
-    """
-
-    weights: np.ndarray
-    area_m2: float
-
-
-def disk_quadrature(
-    center_m: np.ndarray, radius_m: float, n_radial: int, n_angular: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """Points (n, 3) and weights (n,) in m^2 of a horizontal disk; weights sum to pi a^2.
-
-    Gauss-Legendre in r (exact for the r dr measure) times equispaced angles.
-    """
-    s, ws = np.polynomial.legendre.leggauss(n_radial)
-    r = 0.5 * radius_m * (s + 1.0)
-    wr = 0.5 * radius_m * ws * r  # int_0^a f(r) r dr
-    phi = (np.arange(n_angular) + 0.5) * (2.0 * np.pi / n_angular)
-    rr, pp = np.meshgrid(r, phi, indexing="ij")
-    pts = np.column_stack(
-        [
-            center_m[0] + (rr * np.cos(pp)).ravel(),
-            center_m[1] + (rr * np.sin(pp)).ravel(),
-            np.full(rr.size, center_m[2]),
-        ]
-    )
-    w = np.repeat(wr * (2.0 * np.pi / n_angular), n_angular)
-    return pts, w
-
-
-def contact_weights(
-    mesh: TetMesh,
-    center_m: tuple[float, float, float] | np.ndarray,
-    radius_m: float,
-    *,
-    n_radial: int = 16,
-    n_angular: int = 64,
-) -> ContactWeights:
-    """Nodal weights of a contact disk of radius a centred at center_m = (x, y, z), in m.
-
-    Quadrature points outside the block are dropped (an electrode over an edge loses that part
-    of its area); the others are spread over their tet's vertices by barycentric coordinates.
-    """
-    center = np.asarray(center_m, dtype=float)
-    if center.shape != (3,) or not np.all(np.isfinite(center)):
-        raise SceneError(f"electrode centre must be 3 finite coordinates in m, got {center_m}")
-    if not radius_m > 0:
-        raise SceneError(f"electrode contact radius must be positive, got {radius_m}")
-    pts, w = disk_quadrature(center, radius_m, n_radial, n_angular)
-    inside = mesh.grid.contains(pts)
-    pts, w = pts[inside], w[inside]
-    if w.size == 0:
-        raise SceneError(f"electrode contact disk at {center.tolist()} lies outside the block")
-    tet, lam = mesh.locate(pts)
-    weights = np.bincount(
-        mesh.tets[tet].ravel(), (lam * w[:, None]).ravel(), minlength=mesh.n_nodes
-    )
-    return ContactWeights(weights=weights, area_m2=float(weights.sum()))
+from diathermy.physics.contact_load import ContactWeights, same_contact
 
 
 def joule_heat(grads: np.ndarray, tets: np.ndarray, sigma: np.ndarray, V: np.ndarray) -> np.ndarray:
@@ -313,7 +248,7 @@ class DrivenPotential:
     ) -> tuple[np.ndarray, np.ndarray, float, PotentialStats]:
         """(V1, load1, R, stats): potential and load at 1 A, resistance R in ohm."""
         self.solver.set_conductivity(sigma)
-        up_to_date = self._version == self.solver.version and _same_contact(contact, self._contact)
+        up_to_date = self._version == self.solver.version and same_contact(contact, self._contact)
         if up_to_date and self._unit is not None:
             V1, load1, R = self._unit
             return V1, load1, R, PotentialStats(0, 0.0, 0.0, 0.0, 0.0, False, True)
@@ -337,10 +272,6 @@ class DrivenPotential:
             power_w=current**2 * R,
             stats=stats,
         )
-
-
-def _same_contact(a: ContactWeights, b: ContactWeights | None) -> bool:
-    return b is not None and (a is b or np.array_equal(a.weights, b.weights))
 
 
 def drive_current(drive: ElectrodeDrive, area_m2: float, resistance_ohm: float) -> float:

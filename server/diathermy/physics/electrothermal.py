@@ -36,8 +36,8 @@ from diathermy.fem.geometry import ElementGeometry, gradient
 from diathermy.fem.gmres import RightGMRES
 from diathermy.fem.multigrid import scaled_amg_preconditioner
 from diathermy.mesh import TetMesh
+from diathermy.physics.contact_load import ContactWeights
 from diathermy.physics.electric import (
-    ContactWeights,
     DrivenPotential,
     ElectrodeDrive,
     PotentialSolver,

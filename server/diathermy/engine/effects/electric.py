@@ -14,7 +14,8 @@ from diathermy.engine.electrodes import ElectrodePose
 from diathermy.engine.report import EffectReport
 from diathermy.engine.state import ContactKey, SimulationState
 from diathermy.engine.step import MonolithicRequest, Outcome, Step
-from diathermy.physics.electric import ContactWeights, joule_heat
+from diathermy.physics.contact_load import ContactWeights
+from diathermy.physics.electric import joule_heat
 from diathermy.physics.properties import nodes_to_tets
 from diathermy.physics.tissue_effects import electrical_conductivity
 
