@@ -37,10 +37,11 @@ class IncrementalSettings:
     patch_threshold: float = 0.1
     patch_layers: int = 2
     patch_max_nodes: int = 4000
+    patch_rounds: int = 3
 
     def __post_init__(self) -> None:
-        if not self.guard_tolerance > 0 or self.full_every < 1:
-            raise ValueError("guard_tolerance must be > 0 and full_every >= 1")
+        if not self.guard_tolerance > 0 or self.full_every < 1 or self.patch_rounds < 1:
+            raise ValueError("guard_tolerance must be > 0, full_every and patch_rounds >= 1")
 
 
 @dataclass(frozen=True)
@@ -70,17 +71,27 @@ def local_solve(
     Ku = (solver.K @ u.ravel()).reshape(-1, 3)
     alpha = ritz_scale(f, Ku, u, free)
     u, Ku = alpha * u, alpha * Ku
-    nodes = residual_patch(
-        np.where(free, f - Ku, 0.0),
-        graph,
-        threshold=settings.patch_threshold,
-        layers=settings.patch_layers,
-        max_nodes=settings.patch_max_nodes,
-    )
-    patched = patch_correct(solver.K, f, u, Ku, free, nodes)
+    moved = np.zeros(0, dtype=np.int64)
+    first = None
+    for _ in range(settings.patch_rounds):  # each round patches where the last one left off
+        nodes = residual_patch(
+            np.where(free, f - Ku, 0.0),
+            graph,
+            threshold=settings.patch_threshold,
+            layers=settings.patch_layers,
+            max_nodes=settings.patch_max_nodes,
+        )
+        patched = patch_correct(solver.K, f, u, Ku, free, nodes)
+        first = patched.residual_before if first is None else first
+        u, Ku = patched.u, patched.Ku
+        if patched.nodes:
+            moved = np.union1d(moved, nodes)
+        if patched.residual_after <= settings.guard_tolerance or not patched.nodes:
+            break
     held = np.flatnonzero(np.any(~free & (u_prev != 0), axis=1))  # zeroed constrained values
-    moved = np.union1d(nodes if patched.nodes else nodes[:0], held)
-    return LocalSolve(patched.u, patched.residual_after, patched.residual_before, moved, alpha)
+    moved = np.union1d(moved, held)
+    assert first is not None
+    return LocalSolve(u, patched.residual_after, first, moved, alpha)
 
 
 class IncrementalFEMBackend:
