@@ -454,8 +454,11 @@ def write_report(
     lines += [
         "How: each loaded session's engine runs in a process of its own "
         "(`engine_process.py`, forked by a forkserver that imported the engine once); a worker "
-        "thread of the server asks it for one step at a time and applies electrode controls "
-        "between two steps. The engine process takes the step and builds and msgpack-encodes "
+        "thread of the server keeps two step requests in flight, so the engine starts the next "
+        "step while the server journals the last one, and electrode controls go to the engine "
+        "at once, which applies them before its next step (ahead of a queued step) and answers "
+        "in the order it ran them, the order the server journals them in. The engine process "
+        "takes the step and builds and msgpack-encodes "
         "the frame once per distinct subscription; the server journals the step "
         "(`journal.py`) before it hands the bytes to the clients, and the event loop only "
         "prefixes each client's `dropped` counter and writes the bytes (no per-message "
