@@ -239,6 +239,18 @@ def descendants(pid: int) -> list[int]:
     return out
 
 
+def run_queue_s(pid: int) -> float:
+    """Seconds the processes under ``pid`` (the engines) spent runnable but waiting for a CPU
+    (``/proc/<pid>/schedstat``, main threads)."""
+    total = 0.0
+    for child in descendants(pid):
+        try:
+            total += int(Path(f"/proc/{child}/schedstat").read_text().split()[1]) / 1e9
+        except (FileNotFoundError, ProcessLookupError, IndexError):
+            continue
+    return total
+
+
 def tree_cpu_s(pid: int) -> tuple[float, dict[int, float]]:
     """(CPU seconds of ``pid``, {descendant pid: its CPU seconds})."""
     kids = {}
@@ -256,18 +268,23 @@ def grid_rows(
     """Engine alone and 1, 4, 16 clients, interleaved ``reps`` times on fresh sessions (the
     machine is shared, so its load drifts); medians per row, the 16-client ratio per repetition."""
     alone: list[float] = []
+    alone_wait: list[float] = []
     runs: dict[int, list[dict[str, Any]]] = {n: [] for n in clients}
     for _ in range(reps):
         for n in [0, *clients]:
             sid = warm_session(server, grid)
             if n == 0:
+                q0, t0 = run_queue_s(server.proc.pid), time.monotonic()
                 alone.append(engine_alone(server, sid, seconds))
+                alone_wait.append((run_queue_s(server.proc.pid) - q0) / (time.monotonic() - t0))
             else:
+                q0 = run_queue_s(server.proc.pid)
                 c0, t0 = cpu_s(os.getpid()), time.monotonic()
                 s0, e0 = tree_cpu_s(server.proc.pid)
                 runs[n].append(asyncio.run(fan_out(server, sid, n, seconds, 1000.0)))
                 wall = time.monotonic() - t0
                 s1, e1 = tree_cpu_s(server.proc.pid)
+                runs[n][-1]["engine_wait"] = (run_queue_s(server.proc.pid) - q0) / wall
                 runs[n][-1]["server_cpu"] = (s1 - s0) / wall
                 engine = sum(t - e0.get(p, 0.0) for p, t in e1.items())
                 runs[n][-1]["engine_cpu"] = engine / wall
@@ -279,11 +296,12 @@ def grid_rows(
     for n in clients:
         row: dict[str, Any] = {"clients": n, "reps": reps}
         keys = ("steps_per_s", "fps_per_client", "p50_ms", "p99_ms", "vs_alone")
-        for key in (*keys, "server_cpu", "engine_cpu", "client_cpu"):
+        for key in (*keys, "server_cpu", "engine_cpu", "client_cpu", "engine_wait"):
             row[key] = statistics.median(r[key] for r in runs[n])
         row["samples"] = sum(r["samples"] for r in runs[n])
         row["dropped"] = sum(r["dropped"] for r in runs[n])
         row["p99_bound_ms"] = statistics.median(2e3 / r["steps_per_s"] + 20 for r in runs[n])
+        row["alone_wait"] = statistics.median(alone_wait)
         rows.append(row)
     return statistics.median(alone), rows
 
@@ -377,12 +395,13 @@ def fan_table(grid: str, alone: float, fan: list[dict[str, Any]]) -> list[str]:
         f"### Grid {grid}",
         "",
         f"Engine alone (REST steps, no stream client): **{alone:.1f} steps/s** "
-        f"({1e3 / alone:.1f} ms per step), median of {fan[0]['reps']} runs.",
+        f"({1e3 / alone:.1f} ms per step), median of {fan[0]['reps']} runs; the engine waited "
+        f"for a CPU {100 * fan[0]['alone_wait']:.0f} % of the time.",
         "",
         "| clients | steps/s | vs alone | frames/s per client | per client / steps/s | "
         "latency p50 ms | latency p99 ms | p99 bound ms | samples | frames dropped | "
-        "CPU server / engine / clients | targets |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+        "CPU server / engine / clients | engine waits for a CPU | targets |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
     for r in fan:
         bound = r["p99_bound_ms"]
@@ -404,7 +423,7 @@ def fan_table(grid: str, alone: float, fan: list[dict[str, Any]]) -> list[str]:
             f"{r['fps_per_client']:.1f} | {r['fps_per_client'] / r['steps_per_s']:.2f} | "
             f"{r['p50_ms']:.1f} | {r['p99_ms']:.1f} | {bound:.0f} | {r['samples']} | "
             f"{r['dropped']} | {r['server_cpu']:.2f} / {r['engine_cpu']:.2f} / "
-            f"{r['client_cpu']:.2f} | {verdict} |"
+            f"{r['client_cpu']:.2f} | {100 * r['engine_wait']:.0f} % | {verdict} |"
         )
     return lines + [""]
 
@@ -454,8 +473,11 @@ def write_report(
     lines += [
         "How: each loaded session's engine runs in a process of its own "
         "(`engine_process.py`, forked by a forkserver that imported the engine once); a worker "
-        "thread of the server asks it for one step at a time and applies electrode controls "
-        "between two steps. The engine process takes the step and builds and msgpack-encodes "
+        "thread of the server keeps two step requests in flight, so the engine starts the next "
+        "step while the server journals the last one, and electrode controls go to the engine "
+        "at once, which applies them before its next step (ahead of a queued step) and answers "
+        "in the order it ran them, the order the server journals them in. The engine process "
+        "takes the step and builds and msgpack-encodes "
         "the frame once per distinct subscription; the server journals the step "
         "(`journal.py`) before it hands the bytes to the clients, and the event loop only "
         "prefixes each client's `dropped` counter and writes the bytes (no per-message "
@@ -469,7 +491,10 @@ def write_report(
         "engine processes, *clients* the benchmark's client process. Every step moves 16 x the "
         "frame over loopback (150 kB on 17x17x33, 1.2 MB on 33x33x65), which the clients decode "
         "in Python: on 2 cores shared with other jobs the clients fall behind first (frames "
-        "dropped, latency queued in the sockets).",
+        "dropped, latency queued in the sockets). *Engine waits for a CPU*: the share of the "
+        "row's wall time the engine process was runnable but not running (its run-queue delay, "
+        "`/proc/<pid>/schedstat`): time the other jobs, the server and the clients took from "
+        "it, which no change in the service's protocol wins back.",
         "",
         "## Bytes per frame",
         "",

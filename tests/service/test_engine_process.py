@@ -10,8 +10,15 @@ import signal
 from pathlib import Path
 
 import httpx
+import pytest
 
+from diathermy.scene import builtin_scene
+from diathermy.service import engine_ops as ops
+from diathermy.service.encoding import unpack
 from diathermy.service.engine import DefaultEngine
+from diathermy.service.engine_process import RemoteSim
+from diathermy.service.exceptions import NotFoundError
+from diathermy.service.hub import Subscription
 from tests.service.conftest import SMALL, LiveServer, assert_ended, make_settings, running
 from tests.service.test_stream import open_stream, recv_type
 
@@ -87,3 +94,28 @@ def test_shutdown_with_a_dead_engine_keeps_the_session(tmp_path: Path) -> None:
             assert r.status_code == 200 and r.json()["step"] == 4, r.text
     finally:
         again.stop()
+
+
+def test_a_control_overtakes_the_queued_steps_and_the_replies_tell_the_order() -> None:
+    """Pipelined requests: a control sent after four queued steps runs before the steps still
+    waiting; the replies come in the order the engine ran them, with the step the control
+    applied after, and the frames after it carry its control id."""
+    sim = RemoteSim("pipelined")
+    try:
+        sim.call(ops.create, DefaultEngine(), builtin_scene("default").on_uniform_grid((5, 5, 9)))
+        sub = Subscription(fields=("temperature",))
+        steps = [sim.submit(ops.step_frames, (sub,), "s", 0) for _ in range(4)]
+        control = sim.submit(ops.apply_control, "active", {"power_w": 20.0}, 0, urgent=True)
+        assert sim.in_flight == 5
+        order = [sim.receive() for _ in range(5)]
+        assert sim.in_flight == 0 and sorted(r.id for r in order) == sorted([*steps, control])
+        at = next(i for i, r in enumerate(order) if r.id == control)
+        assert at < 4, "the control waited behind every queued step"
+        assert order[at].ok and order[at].value == (1, at)  # control id 1, after step `at`
+        frames = [unpack(r.value[1][sub].to_bytes(0)) for r in order if r.id != control]
+        assert [f["step"] for f in frames] == [1, 2, 3, 4] and sim.step_index == 4
+        assert [f["control_id"] for f in frames] == [0] * at + [1] * (4 - at)
+        with pytest.raises(NotFoundError):  # errors still come back to the caller
+            sim.call(ops.apply_control, "nope", {"power_w": 1.0}, 0)
+    finally:
+        sim.close()

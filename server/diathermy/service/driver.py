@@ -2,11 +2,15 @@
 
 While running, a worker thread keeps the session lock for as many steps as it can, each one
 taken by the session's engine process: it paces itself to the requested rate there and returns
-only when paused or when something else waits for the session (an electrode control, a REST read,
-a subscription), which then runs before the next step. So the engine's rate does not depend on
-the event loop, which only writes frames to sockets. Electrode controls do not stop the batch: they are handed to it and
-applied between two steps, so a control waits at most for the step in progress. Steps asked for
-with ``step`` are taken one per batch, so that a client reading at once gets every frame.
+only when paused or when something else waits for the session (a REST read, a subscription, an
+autosave), which then runs after the steps in flight. The batch keeps up to ``STEPS_IN_FLIGHT``
+step requests in flight (``engine_process.py``), so the engine starts the next step while the
+worker thread journals the last one and hands its frames to the event loop, which only writes
+bytes to sockets. Electrode controls do not stop the batch: they go to the engine at once, which
+applies them before its next step (ahead of a queued step), so a control waits at most for the
+step in progress; the batch journals steps and controls in the order the engine took them.
+Steps asked for with ``step`` are taken one per batch, so that a client reading at once gets
+every frame.
 """
 
 from __future__ import annotations
@@ -17,12 +21,17 @@ import time
 from typing import Any, Protocol
 
 from diathermy.errors import DiathermyError
+from diathermy.service import engine_ops as ops
+from diathermy.service.engine_process import RemoteSim
 from diathermy.service.errors import classify
-from diathermy.service.exceptions import LimitExceededError
+from diathermy.service.exceptions import EngineProcessError, LimitExceededError
 from diathermy.service.hub import Subscriber
 from diathermy.service.registry import SessionRecord
-from diathermy.service.sessions import advance, run_locked
+from diathermy.service.sessions import control_applied, publish_step, run_locked
 from diathermy.service.state import AppState
+
+STEPS_IN_FLIGHT = 2
+"""Step requests a stream keeps in flight: the one the engine takes, and the next one."""
 
 
 class StreamClient(Protocol):
@@ -49,6 +58,8 @@ class SessionDriver:
         self._task: asyncio.Task[None] | None = None
         self._next_t = 0.0
         self._loop_ref = asyncio.get_running_loop()
+        self._steps_sent = 0  # step requests in flight (worker thread)
+        self._error: Exception | None = None  # a step that failed in the batch
 
     def attach(self, sub: Subscriber, conn: StreamClient) -> None:
         self.clients[sub] = conn
@@ -113,57 +124,92 @@ class SessionDriver:
         for conn in list(self.clients.values()):
             await conn.close(code, error, message, field)
 
-    def _batch(self, sim: Any) -> bool:
+    def _batch(self, sim: RemoteSim) -> bool:
         """Step while there is work and nobody else waits for the session (worker thread).
 
-        Electrode controls offered meanwhile (``SessionRecord.offer``) are applied between
-        steps. Returns True after taking one requested step (the event loop counts it off)."""
+        Electrode controls offered meanwhile (``SessionRecord.offer``) are journalled as their
+        replies come. Returns True after taking one requested step (the event loop counts it
+        off). Everything in flight is received before it returns."""
         rec = self.rec
+        self._error = None
         with rec.batch_lock:
             rec.batch_active = True
         try:
-            return self._steps(sim)
+            took = self._steps(sim)
         finally:
-            while True:  # apply what was offered before the batch ends, then stop taking more
-                self._apply_controls(sim)
-                with rec.batch_lock:
-                    if not rec.controls:
-                        rec.batch_active = False
-                        break
+            with rec.batch_lock:  # no more controls; take the replies of those sent
+                rec.batch_active = False
+            while sim.in_flight:
+                self._receive(sim)
+        if self._error is not None:
+            raise self._error
+        return took
 
-    def _steps(self, sim: Any) -> bool:
+    def _steps(self, sim: RemoteSim) -> bool:
         rec, interrupt = self.rec, self.rec.interrupt
-        while rec.waiting == 0 and not rec.deleted:
+        while rec.waiting == 0 and not rec.deleted and self._error is None:
             interrupt.clear()
-            self._apply_controls(sim)
             if self.pending:  # requested steps: one per batch, so that each frame goes out
-                advance(rec, self.state.registry, sim, 1, self.state.metrics)
-                return True
-            if self.running:
+                while self._steps_sent:
+                    self._receive(sim)
+                if self._error is not None:
+                    break
+                self._send_step(sim)
+                while self._steps_sent:
+                    self._receive(sim)
+                return self._error is None
+            delay: float | None = None
+            if self.running and self._steps_sent < STEPS_IN_FLIGHT:
                 delay = self._next_t - time.monotonic()
-                if delay > 0:
-                    interrupt.wait(delay)  # woken early by a control, a pause or a stop
+                if delay <= 0:
+                    self._next_t = max(self._next_t + 1.0 / self.rate_hz, time.monotonic())
+                    self._send_step(sim)
                     continue
-                self._next_t = max(self._next_t + 1.0 / self.rate_hz, time.monotonic())
-            else:
+            elif not self.running and not sim.in_flight:
                 return False
-            advance(rec, self.state.registry, sim, 1, self.state.metrics)
+            if not sim.in_flight:
+                interrupt.wait(delay)  # woken early by a control, a pause or a stop
+            elif sim.poll(delay):  # a reply, or the next step is due
+                self._receive(sim)
         return False
 
-    def _apply_controls(self, sim: Any) -> None:
-        """Run the offered controls in order and hand each its result (worker thread)."""
-        loop = self._loop_ref
-        while True:
-            with self.rec.batch_lock:
-                if not self.rec.controls:
-                    return
-                fn, fut = self.rec.controls.popleft()
-            try:
-                result = fn(sim)
-            except Exception as err:
-                loop.call_soon_threadsafe(_settle, fut, None, err)
+    def _send_step(self, sim: RemoteSim) -> None:
+        subs = self.rec.hub.subscriptions()
+        sim.submit(ops.step_frames, subs, self.rec.id, self.rec.control_id)
+        self._steps_sent += 1
+
+    def _receive(self, sim: RemoteSim) -> None:
+        """Take the engine's next reply: journal then publish a step, or journal then settle a
+        control (worker thread). A failed step is kept in ``_error`` and stops the batch."""
+        rec = self.rec
+        try:
+            reply = sim.receive()
+        except EngineProcessError as err:
+            self._steps_sent = 0
+            self._fail_controls(err)
+            raise
+        with rec.batch_lock:
+            offered = rec.controls.pop(reply.id, None)
+        if offered is not None:
+            control, fut = offered
+            if reply.ok:
+                result = control_applied(rec, self.state.registry, control, reply.value)
+                self._loop_ref.call_soon_threadsafe(_settle, fut, result, None)
             else:
-                loop.call_soon_threadsafe(_settle, fut, result, None)
+                self._loop_ref.call_soon_threadsafe(_settle, fut, None, reply.value)
+            return
+        self._steps_sent -= 1
+        if not reply.ok:
+            self._error = self._error or reply.value
+            return
+        report, frames = reply.value
+        publish_step(rec, self.state.registry, self.state.metrics, report, frames)
+
+    def _fail_controls(self, err: Exception) -> None:
+        with self.rec.batch_lock:
+            offered, self.rec.controls = self.rec.controls, {}
+        for _, fut in offered.values():
+            self._loop_ref.call_soon_threadsafe(_settle, fut, None, err)
 
     async def _loop(self) -> None:
         while True:

@@ -3,6 +3,11 @@
 
 Stepping builds and msgpack-encodes the frames of the step there too, once per distinct
 subscription due, so the server only journals the step and writes bytes to sockets.
+
+The engine process counts the electrode controls it applied (``ControlCount``): a stream's controls
+may overtake a queued step (``engine_process.py``), so the frame of a step carries the count the
+engine had when it took the step. Every request carries the server's count, which the engine
+catches up to (a restore bumps it; a new engine process starts from it).
 """
 
 from __future__ import annotations
@@ -63,10 +68,24 @@ def save_checkpoint(sim: Any, path: Path) -> None:
     sim.save_checkpoint(path)
 
 
+class ControlCount:
+    """The id of the last electrode control applied in this engine process (one per session)."""
+
+    last = 0
+
+    @classmethod
+    def catch_up(cls, server_count: int) -> int:
+        cls.last = max(cls.last, int(server_count))
+        return cls.last
+
+
 def step_frames(
     sim: Any, subscriptions: tuple[Subscription, ...], session_id: str, control_id: int
 ) -> tuple[Any, dict[Subscription, Frame]]:
-    """Take one step; (its report, the frame of each subscription due at the new step)."""
+    """Take one step; (its report, the frame of each subscription due at the new step).
+
+    ``control_id``: the server's control count when it asked (frames carry the engine's)."""
+    control_id = ControlCount.catch_up(control_id)
     report = sim.step()
     due = [s for s in subscriptions if sim.step_index % s.every == 0]
     if not due:
@@ -84,6 +103,14 @@ def set_electrode(sim: Any, name: str, changes: dict[str, Any]) -> int:
         )
     sim.set_electrode(name, **changes)
     return int(sim.step_index)
+
+
+def apply_control(sim: Any, name: str, changes: dict[str, Any], control_id: int) -> tuple[int, int]:
+    """Apply electrode changes from the next step; (the control's id, the step it applies
+    after). ``control_id``: the server's control count when it asked."""
+    step = set_electrode(sim, name, changes)
+    ControlCount.last = ControlCount.catch_up(control_id) + 1
+    return ControlCount.last, step
 
 
 def parse_field_names(text: str | None, available: list[str]) -> list[str]:

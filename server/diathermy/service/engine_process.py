@@ -3,10 +3,18 @@ server's GIL: the event loop writes frames to sockets while the engine steps on 
 
 The server holds one ``RemoteSim`` per loaded session: a pipe to its engine process (forked by a
 forkserver that has imported the engine once) and what the server reads without asking (step,
-time, the last step report, DOF counts), refreshed by every call. ``call(op, *args)`` runs
+time, the last step report, DOF counts), refreshed by every reply. ``call(op, *args)`` runs
 ``op(sim, *args)`` in the engine process (``op`` is a module-level function, ``engine_ops.py``)
 and returns its value or raises its exception; an op that returns ``Replace`` swaps the process's
-simulation (create, load, restore). One call at a time: callers hold the session lock.
+simulation (create, load, restore). Callers hold the session lock.
+
+Requests can also be pipelined: ``submit`` sends one without waiting and ``receive`` reads the
+next reply. The engine process reads every request that has arrived before it runs the next
+one and runs the *urgent* ones (electrode controls) first, so a control sent while a step is
+queued is applied before that step; each reply carries its request's id, and the replies come in
+the order the engine ran the requests, which is the order the server journals them in. A stream
+keeps up to two steps in flight this way (``driver.py``), so the engine starts the next step
+while the server journals the last one and hands out its frames.
 
 An engine process ends when the server closes the pipe (DELETE, shutdown), when the server dies
 (the kernel closes the server's end; mid-step, the parent watch notices that the forkserver,
@@ -25,6 +33,7 @@ import socket
 import threading
 import time
 import traceback
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
@@ -55,6 +64,15 @@ class SimStatus:
     dof_counts: dict[str, int]
 
 
+@dataclass(frozen=True)
+class Reply:
+    """The engine's answer to request ``id``: ``value`` is the op's result, or its exception."""
+
+    id: int
+    ok: bool
+    value: Any
+
+
 @functools.cache
 def _context() -> BaseContext:
     ctx = multiprocessing.get_context("forkserver")
@@ -75,7 +93,10 @@ class RemoteSim:
         )
         self._proc.start()
         child.close()
-        self._lock = threading.Lock()
+        self._lock = threading.Lock()  # one caller at a time
+        self._send_lock = threading.Lock()  # requests may be sent from any thread
+        self._next_id = 0
+        self.in_flight = 0  # requests sent whose reply has not been read
         self.failed = False
         self.step_index = 0
         self.time_s = 0.0
@@ -87,24 +108,65 @@ class RemoteSim:
         return self._proc.pid
 
     def call(self, op: Callable[..., Any], *args: Any) -> Any:
-        """``op(sim, *args)`` in the engine process; its exceptions are raised here."""
+        """``op(sim, *args)`` in the engine process; its exceptions are raised here. Nothing
+        may be in flight (see ``submit``)."""
         with self._lock:
+            rid = self.submit(op, *args)
+            reply = self.receive()
+        if reply.id != rid:
+            raise RuntimeError(f"engine reply {reply.id} answers another request than {rid}")
+        if not reply.ok:
+            raise reply.value
+        return reply.value
+
+    def submit(self, op: Callable[..., Any], *args: Any, urgent: bool = False) -> int:
+        """Send ``op(sim, *args)`` without waiting for it; returns the request's id (any thread).
+
+        ``urgent`` requests run before the ones that arrived earlier and wait in the engine
+        process (an electrode control before a queued step)."""
+        with self._send_lock:
             if self.failed:
                 raise self._gone()
+            self._next_id += 1
             try:
-                self._conn.send((op, args))
-                reply = self._conn.recv()
-            except (EOFError, OSError):
-                self.failed = True
-                self._proc.join(timeout=2.0)
+                self._conn.send((self._next_id, op, args, urgent))
+            except OSError:
+                self._fail()
                 raise self._gone() from None
-        kind, value, status = reply
+            self.in_flight += 1
+            return self._next_id
+
+    def poll(self, timeout_s: float | None) -> bool:
+        """Whether a reply is there to read, waiting up to ``timeout_s`` (None: until one is)."""
+        if self.failed:
+            raise self._gone()
+        try:
+            return bool(self._conn.poll(None if timeout_s is None else max(0.0, timeout_s)))
+        except (EOFError, OSError):
+            self._fail()
+            raise self._gone() from None
+
+    def receive(self) -> Reply:
+        """The next reply, in the order the engine ran the requests (the thread that holds the
+        session lock only: one reader)."""
+        if self.failed:
+            raise self._gone()
+        try:
+            rid, ok, value, status = self._conn.recv()
+        except (EOFError, OSError):
+            self._fail()
+            raise self._gone() from None
+        with self._send_lock:
+            self.in_flight -= 1
         if status is not None:
             self.step_index, self.time_s = status.step, status.time_s
             self.last_report, self.dof_counts = status.report, status.dof_counts
-        if kind == "err":
-            raise value
-        return value
+        return Reply(rid, ok, value)
+
+    def _fail(self) -> None:
+        self.failed = True
+        self.in_flight = 0
+        self._proc.join(timeout=2.0)
 
     def _gone(self) -> EngineProcessError:
         code = self._proc.exitcode
@@ -116,10 +178,10 @@ class RemoteSim:
 
     def close(self, timeout_s: float = 10.0) -> None:
         """End the engine process: ask, then wait, then kill (caller holds the session lock)."""
-        with self._lock:
+        with self._lock, self._send_lock:
             self.failed = True
             try:
-                self._conn.send((None, ()))
+                self._conn.send((0, None, (), False))
             except OSError:
                 pass
             self._conn.close()
@@ -162,24 +224,39 @@ def serve(conn: Connection) -> None:
     _widen(conn)
     threading.Thread(target=_watch_parent, args=(os.getppid(),), daemon=True).start()
     sim: Any = None
+    waiting: deque[tuple[int, Any, tuple[Any, ...], bool]] = deque()
     while True:
         try:
-            op, args = conn.recv()
+            if not waiting:
+                waiting.append(conn.recv())
+            while conn.poll():  # everything sent so far, so that urgent requests go first
+                waiting.append(conn.recv())
         except (EOFError, OSError):
             return
+        rid, op, args, _ = _take(waiting)
         if op is None:
             return
         try:
             result = op(sim, *args)
             if isinstance(result, Replace):
                 sim, result = result.sim, result.value
-            reply: tuple[str, Any, SimStatus | None] = ("ok", result, _status(sim))
+            reply: tuple[int, bool, Any, SimStatus | None] = (rid, True, result, _status(sim))
         except Exception as err:
-            reply = ("err", err, _status(sim))
+            reply = (rid, False, err, _status(sim))
         try:
             conn.send(reply)
         except OSError:
             return
         except Exception:  # the value or the error could not be pickled
             text = traceback.format_exc(limit=3)
-            conn.send(("err", RuntimeError(f"engine reply not sendable: {text}"), _status(sim)))
+            error = RuntimeError(f"engine reply not sendable: {text}")
+            conn.send((rid, False, error, _status(sim)))
+
+
+def _take(waiting: deque[tuple[int, Any, tuple[Any, ...], bool]]) -> Any:
+    """The first urgent request, else the oldest one."""
+    for i, request in enumerate(waiting):
+        if request[3]:
+            del waiting[i]
+            return request
+    return waiting.popleft()

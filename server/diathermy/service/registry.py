@@ -21,8 +21,6 @@ import shutil
 import threading
 import time
 import uuid
-from collections import deque
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -53,6 +51,14 @@ def public_meta(rec: SessionRecord) -> dict[str, Any]:
     return {**rec.meta, **live, "dof_counts": rec.sim.dof_counts or rec.meta.get("dof_counts")}
 
 
+@dataclass(frozen=True)
+class Control:
+    """An electrode change asked for by a client: the electrode's name and the new values."""
+
+    name: str
+    changes: dict[str, Any]
+
+
 @dataclass(eq=False)
 class SessionRecord:
     """One session: its owner, metadata, the simulation once loaded, and what guards it."""
@@ -72,7 +78,7 @@ class SessionRecord:
     waiting: int = 0  # tasks waiting for the lock: a stepping batch yields to them
     exclusive: bool = False  # a REST step or restore is queued or running (a second gets 409)
     batch_active: bool = False  # a stream's stepping batch holds the lock (driver.py)
-    controls: deque[tuple[Callable[[Any], Any], asyncio.Future[Any]]] = field(default_factory=deque)
+    controls: dict[int, tuple[Control, asyncio.Future[Any]]] = field(default_factory=dict)
     batch_lock: threading.Lock = field(default_factory=threading.Lock)
     interrupt: threading.Event = field(default_factory=threading.Event)
 
@@ -91,14 +97,19 @@ class SessionRecord:
     def journal_path(self) -> Path:
         return self.directory / "journal.jsonl"
 
-    def offer(self, fn: Callable[[Any], Any]) -> asyncio.Future[Any] | None:
-        """Hand ``fn(sim)`` to the running stepping batch, which applies it before its next
-        step (no lock hand-over); None when no batch runs (then take the lock instead)."""
+    def offer(self, control: Control) -> asyncio.Future[Any] | None:
+        """Send ``control`` to the engine while a stream's stepping batch runs: the engine
+        applies it before its next step, and the batch journals it in the engine's order and
+        settles the future with (control id, step applied after). None when no batch runs (then
+        take the lock instead)."""
         with self.batch_lock:
-            if not self.batch_active:
+            if not self.batch_active or self.sim is None:
                 return None
             fut = asyncio.get_running_loop().create_future()
-            self.controls.append((fn, fut))
+            rid = self.sim.submit(
+                ops.apply_control, control.name, control.changes, self.control_id, urgent=True
+            )
+            self.controls[rid] = (control, fut)
         self.interrupt.set()
         return fut
 

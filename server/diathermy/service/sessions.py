@@ -25,10 +25,10 @@ from diathermy.service.exceptions import (
     SessionBusyError,
     SessionNotFoundError,
 )
-from diathermy.service.hub import report_dict
+from diathermy.service.hub import Frame, Subscription, report_dict
 from diathermy.service.limits import check_drive, check_grid, check_session_count, check_steps
 from diathermy.service.metrics import ServiceMetrics
-from diathermy.service.registry import SessionRecord, SessionRegistry, public_meta
+from diathermy.service.registry import Control, SessionRecord, SessionRegistry, public_meta
 from diathermy.service.schemas import (
     ElectrodeUpdate,
     GridPublic,
@@ -146,13 +146,34 @@ def advance(
     for _ in range(n):
         subs = rec.hub.subscriptions()
         rep, frames = sim.call(ops.step_frames, subs, rec.id, rec.control_id)
-        registry.log_step(rec)
-        metrics.observe_report(rep)
-        drops = rec.hub.deliver(frames)
-        if drops:
-            metrics.frames_dropped.inc(drops)
+        publish_step(rec, registry, metrics, rep, frames)
         reports.append(rep)
     return reports
+
+
+def publish_step(
+    rec: SessionRecord,
+    registry: SessionRegistry,
+    metrics: ServiceMetrics,
+    report: Any,
+    frames: dict[Subscription, Frame],
+) -> None:
+    """Journal the step the engine just took, then hand its frames to the subscribers."""
+    registry.log_step(rec)
+    metrics.observe_report(report)
+    drops = rec.hub.deliver(frames)
+    if drops:
+        metrics.frames_dropped.inc(drops)
+
+
+def control_applied(
+    rec: SessionRecord, registry: SessionRegistry, control: Control, result: tuple[int, int]
+) -> tuple[int, int]:
+    """Journal an electrode control the engine applied; (its control id, the step it applies
+    after)."""
+    registry.log_electrode(rec, control.name, control.changes)
+    rec.control_id = max(rec.control_id, result[0])
+    return result
 
 
 async def step_session(
@@ -175,16 +196,15 @@ async def update_electrode(
 ) -> tuple[int, int]:
     """Apply electrode changes before the next step; returns (new control id, step applied at)."""
 
+    control = Control(name, update.model_dump(exclude_none=True))
+
     def apply(sim: RemoteSim) -> tuple[int, int]:
-        changes = update.model_dump(exclude_none=True)
-        step = sim.call(ops.set_electrode, name, changes)
-        registry.log_electrode(rec, name, changes)
-        rec.control_id += 1
-        return rec.control_id, step
+        result = sim.call(ops.apply_control, control.name, control.changes, rec.control_id)
+        return control_applied(rec, registry, control, result)
 
     if rec.deleted:
         raise SessionNotFoundError(f"session {rec.id} was deleted", field="session_id")
-    offered = rec.offer(apply)  # a stream is stepping: applied between two of its steps
+    offered = rec.offer(control)  # a stream is stepping: applied before its next step
     if offered is not None:
         result: tuple[int, int] = await offered
         return result

@@ -183,7 +183,12 @@ class StreamConnection:
                 await self.ws.close(code=code, reason=close_reason(error, message, field))
 
     async def _ack(
-        self, of: str, driver: SessionDriver, tag: Any = None, step: int | None = None
+        self,
+        of: str,
+        driver: SessionDriver,
+        tag: Any = None,
+        step: int | None = None,
+        control_id: int | None = None,
     ) -> None:
         if step is None and self.rec.sim is not None:
             step = self.rec.sim.step_index
@@ -192,7 +197,7 @@ class StreamConnection:
                 "type": "ack",
                 "of": of,
                 "step": step,
-                "control_id": self.rec.control_id,
+                "control_id": self.rec.control_id if control_id is None else control_id,
                 "tag": tag,
                 "running": driver.running,
                 "rate_hz": driver.rate_hz,
@@ -208,10 +213,10 @@ class StreamConnection:
             update = ElectrodeUpdate(
                 **msg.model_dump(exclude={"type", "name", "tag"}, exclude_none=True)
             )
-            _, step = await update_electrode(
+            control_id, step = await update_electrode(
                 registry=self.state.registry, rec=self.rec, name=msg.name, update=update
             )
-            await self._ack("electrode", driver, msg.tag, step)
+            await self._ack("electrode", driver, msg.tag, step, control_id)
         elif isinstance(msg, Run):
             driver.run(msg.rate_hz)
             await self._ack("run", driver)
