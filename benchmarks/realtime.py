@@ -1,19 +1,26 @@
 """Real time (issue #25): what a cutting step costs, full against incremental, one command.
 
-    python benchmarks/realtime.py run [--grids 0 0.4] [--steps N]
+    python benchmarks/realtime.py run [--scenes NAME ...] [--grids own uniform] [--steps N]
+    python benchmarks/realtime.py profile [--scenes default] [--grids own uniform] [--steps N]
     python benchmarks/realtime.py solvers [--grids 0 0.5] [--steps N] [--rounds N]
 
-``run``: the fixed-electrode scene (as below) from the checkpoint two steps after the first cut,
-in three modes stepped in lockstep (one step of each in turn, so that other load on a shared
-machine hits them alike): ``full`` (``solver.incremental`` false: every effect solved in full
-every step, the reference), ``incremental`` (the default: the mechanics from the previous
-displacement, Ritz-scaled, patch-corrected, a full solve when the residual check or the
-interval asks for it) and, on the uniform 33x33x65 grid that has a shipped model,
-``cnn`` (the CNN predictor with its patch). Per mode: median and p90 wall time per step, the
-real-time factor (dt / median wall), the mechanics' share of local steps, and against ``full``
-at the same step the max and mean strain-energy error and the max temperature error, and the
-final cut-volume difference. Writes ``benchmarks/results/realtime.md`` and ``realtime.png``
-(wall time per step).
+``run``: per built-in scene (``default``, ``fixed-electrode``, ``moving-electrode`` at the paper's
+12.35 mm/s, ``moving-electrode-slow``, ``coagulation``) and per grid (``own``: the scene's graded
+grid; ``uniform``: 33x33x65), a warm-up run with the engine's defaults to two steps after the
+first cut (or ``--warmup`` steps where nothing cuts by then) is checkpointed (cached under
+``runs/realtime/``); from it every mode steps ``--steps`` steps in lockstep (one step of each in
+turn, so that other load on a shared machine hits them alike): ``full`` (``solver.incremental``
+false: every effect solved in full every step, the reference), ``incremental`` (the default:
+the mechanics from the previous displacement, Ritz-scaled, patch-corrected, a full solve when
+the residual check or the interval asks for it) and, on the uniform grid that has a shipped
+model, ``cnn`` (the CNN predictor with its patch). Per mode: median and p90 wall time per step,
+the real-time factor (dt / median wall), the median time of each effect, the mechanics' share
+of local steps, and against ``full`` at the same step the max and mean strain-energy error and
+the max temperature error, and the final cut-volume difference. Writes
+``benchmarks/results/realtime.md`` and ``realtime.png`` (wall time per step).
+
+``profile``: the same checkpoints, the incremental mode only, under cProfile: the functions
+that take the time of a cutting step (``benchmarks/results/realtime_profile.md``).
 
 ``solvers``: the fixed-electrode scene (current-density drive, ``benchmarks/convergence.py``'s
 ``scene_for``) on uniform 33x33x65 and on the graded 0.5 mm grid, from one checkpoint per grid
@@ -42,6 +49,7 @@ Writes ``benchmarks/results/realtime_solvers.md``.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
@@ -54,17 +62,18 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "server"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from convergence import scene_for  # noqa: E402
+from convergence import UNIFORM, scene_for  # noqa: E402
 
 from diathermy.engine.backends import fem_of  # noqa: E402
 from diathermy.engine.simulation import Simulation  # noqa: E402
 from diathermy.physics.mechanics import DEFAULT_AMG_OPTIONS  # noqa: E402
 from diathermy.physics.strain_energy import relative_strain_energy_error  # noqa: E402
-from diathermy.scene import Scene  # noqa: E402
+from diathermy.scene import Scene, builtin_scene  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results"
 CACHE = ROOT / "runs" / "realtime"
 VARIANTS = ("main", "+ritz", "+reuse", "+local")
+SCENES = ("default", "fixed-electrode", "moving-electrode", "moving-electrode-slow", "coagulation")
 LOCAL_AMG_OPTIONS: dict[str, Any] = {
     **DEFAULT_AMG_OPTIONS,
     "smooth": ("jacobi", {"omega": 4.0 / 3.0, "weighting": "local"}),
@@ -76,20 +85,36 @@ def grid_label(fine_mm: float) -> str:
 
 
 def checkpoint(fine_mm: float) -> Path:
-    """The state two steps after the first cut (a warm-up run with the engine's defaults)."""
+    """The fixed electrode (current-density drive) at ``fine_mm`` two steps after the first cut."""
     path = CACHE / f"fixed_{'uniform' if fine_mm <= 0 else f'{fine_mm:g}mm'}.h5"
-    if path.exists():
-        return path
-    sim = Simulation(scene_for(fine_mm, moving=False))
-    after_cut = None
-    while after_cut is None or sim.step_index < after_cut + 2:
+    return warm_up(scene_for(fine_mm, moving=False), path, warmup=10_000)[0]
+
+
+def warm_up(scene: Scene, path: Path, warmup: int) -> tuple[Path, int | None]:
+    """``scene`` stepped to two steps after its first cut, or ``warmup`` steps if it has not cut
+    by then, checkpointed at ``path`` (reused when it exists); (path, first cut step or None)."""
+    meta = path.with_suffix(".json")
+    if path.exists() and meta.exists():
+        return path, json.loads(meta.read_text())["first_cut_step"]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    sim = Simulation(scene)
+    after_cut: int | None = None
+    while (after_cut is None and sim.step_index < warmup) or (
+        after_cut is not None and sim.step_index < after_cut + 2
+    ):
         r = sim.step()
         if after_cut is None and r.cut_volume_m3 > 0:
             after_cut = sim.step_index
-        print(
-            f"  warm-up step {r.step}: {r.wall_s:.2f} s, cut {r.cut_volume_m3:.2e} m^3", flush=True
-        )
-    return sim.save_checkpoint(path)
+        print(f"  {scene.name} warm-up step {r.step}: {r.wall_s:.2f} s", flush=True)
+    sim.save_checkpoint(path)
+    meta.write_text(json.dumps({"first_cut_step": after_cut}))
+    return path, after_cut
+
+
+def scene_on(name: str, grid: str) -> Scene:
+    """Built-in scene ``name`` on its own graded grid or on the uniform 33x33x65."""
+    scene = builtin_scene(name)
+    return scene if grid == "own" else scene.on_uniform_grid(UNIFORM)
 
 
 def configure(sim: Simulation, variant: str) -> None:
@@ -148,94 +173,187 @@ MODES: dict[str, dict[str, Any]] = {
     "incremental": {},
     "cnn": {"backend": "cnn"},
 }
+EFFECTS = ("electric", "thermal", "vaporization", "mechanics", "dissection")
 
 
-def run_modes(path: Path, fine_mm: float, steps: int) -> dict[str, dict[str, list[float]]]:
+def modes_for(scene: Scene) -> list[str]:
+    """The modes that apply: the CNN only with mechanics on a grid with a shipped model."""
+    cnn = "mechanics" in scene.closed_effects and scene.resolution is None
+    cnn = cnn and tuple(scene.grid) == UNIFORM
+    return [m for m in MODES if m != "cnn" or cnn]
+
+
+def run_modes(path: Path, modes: list[str], steps: int) -> dict[str, dict[str, list[float]]]:
     """Every mode from the checkpoint, stepped in lockstep; per mode the per-step records."""
-    names = [m for m in MODES if m != "cnn" or fine_mm <= 0]
-    sims = {m: load_as(path, **dict(MODES[m])) for m in names}
-    rec: dict[str, dict[str, list[float]]] = {
-        m: {k: [] for k in ("wall_s", "se_err", "dT_k", "local", "cut_m3")} for m in names
-    }
+    sims = {m: load_as(path, **dict(MODES[m])) for m in modes}
+    keys = ("wall_s", "se_err", "dT_k", "local", "cut_m3", *EFFECTS)
+    rec: dict[str, dict[str, list[float]]] = {m: {k: [] for k in keys} for m in modes}
     for _ in range(steps):
         for m, sim in sims.items():
             r = sim.step()
-            mech = r.effects["mechanics"]
+            mech = r.effects.get("mechanics")
             rec[m]["wall_s"].append(r.wall_s)
-            rec[m]["local"].append(float(mech.ran and mech.extra.get("mode") == "local"))
+            rec[m]["local"].append(
+                float(mech is not None and mech.ran and mech.extra.get("mode") == "local")
+            )
             rec[m]["cut_m3"].append(r.cut_volume_m3)
+            for e in EFFECTS:
+                eff = r.effects.get(e)
+                rec[m][e].append(eff.wall_s if eff is not None and eff.ran else 0.0)
         ref = sims["full"].state
         for m, sim in sims.items():
             W, W_ref = sim.state["strain_energy"], ref["strain_energy"]
-            rec[m]["se_err"].append(relative_strain_energy_error(W, W_ref) if W_ref.any() else 0.0)
+            rec[m]["se_err"].append(
+                relative_strain_energy_error(W, W_ref) if W_ref is not None and W_ref.any() else 0.0
+            )
             rec[m]["dT_k"].append(
                 float(np.abs(sim.state["temperature"] - ref["temperature"]).max())
             )
     return rec
 
 
-def write_run(results: dict, a: argparse.Namespace, started: str, dt_s: float) -> None:
-    grids = " ".join(f"{g:g}" for g in a.grids)
+def write_run(runs: dict, a: argparse.Namespace, started: str, out: Path = RESULTS) -> None:
     load = os.getloadavg()
     lines = [
         "# Real time: a cutting step, full against incremental",
         "",
-        f"`python benchmarks/realtime.py run --grids {grids} --steps {a.steps}` (started "
-        f"{started}): the fixed-electrode scene (current-density drive) from the checkpoint two "
-        f"steps after the first cut, {a.steps} steps per mode, the modes stepped in lockstep. A "
-        "short run on a 2-core machine that other jobs may share (load average when written: "
-        f"{load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f}): wall times are inflated alike for "
-        "every mode, read the ratios. Errors are against the full mode at "
-        "the same step (strain energy: the paper's relative L2 over tets).",
+        f"`python benchmarks/realtime.py run --scenes {' '.join(a.scenes)} --grids "
+        f"{' '.join(a.grids)} --steps {a.steps}` (started {started}): each scene from its "
+        "checkpoint two steps after the first cut (or after the warm-up where it does not cut), "
+        f"{a.steps} steps per mode, the modes stepped in lockstep; every measured step is in the "
+        "cutting phase where the scene cuts. A 2-core machine that other jobs may share (load "
+        f"average when written: {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f}): wall times are "
+        "inflated alike for every mode, read the ratios. Errors are against the full mode at "
+        "the same step (strain energy: the paper's relative L2 over tets). Effect columns: "
+        "median wall time of each effect per step (s).",
         "",
-        "| grid | mode | median step s | p90 step s | x full | real-time factor | local mechanics steps | max SE error | mean SE error | max T error K | cut volume vs full |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| scene | grid | nodes | first cut | mode | median step s | p90 step s | x full | "
+        "real-time factor | electric | thermal | mechanics | dissection | local mechanics "
+        "steps | max SE error | mean SE error | max T error K | cut volume vs full |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for fine, rec in results.items():
+    for (name, _grid), run in runs.items():
+        rec, dt_s = run["rec"], run["dt_s"]
         base = float(np.median(rec["full"]["wall_s"]))
+        cut_at = "none" if run["first_cut"] is None else f"step {run['first_cut']}"
         for m, r in rec.items():
             med, p90 = float(np.median(r["wall_s"])), float(np.percentile(r["wall_s"], 90))
             cut, cut_ref = r["cut_m3"][-1], rec["full"]["cut_m3"][-1]
             rel_cut = (cut - cut_ref) / cut_ref if cut_ref > 0 else 0.0
+            effects = " | ".join(f"{np.median(r[e]):.3f}" for e in EFFECTS if e != "vaporization")
             lines.append(
-                f"| {grid_label(fine)} | {m} | {med:.2f} | {p90:.2f} | {med / base:.2f} | "
-                f"{dt_s / med:.3f} | {int(sum(r['local']))}/{len(r['local'])} | "
-                f"{max(r['se_err']):.2e} | {np.mean(r['se_err']):.2e} | {max(r['dT_k']):.2e} | "
-                f"{rel_cut:+.2e} |"
+                f"| {name} | {run['grid_label']} | {run['nodes']:,} | {cut_at} | {m} | {med:.2f} "
+                f"| {p90:.2f} | {med / base:.2f} | {dt_s / med:.3f} | {effects} | "
+                f"{int(sum(r['local']))}/{len(r['local'])} | {max(r['se_err']):.2e} | "
+                f"{np.mean(r['se_err']):.2e} | {max(r['dT_k']):.2e} | {rel_cut:+.2e} |"
             )
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / "realtime.md").write_text("\n".join(lines) + "\n")
-    plot_run(results)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "realtime.md").write_text("\n".join(lines) + "\n")
+    plot_run(runs, out)
     print("\n".join(lines))
 
 
-def plot_run(results: dict) -> None:
+def plot_run(runs: dict, out: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, len(results), figsize=(5 * len(results), 3.5), squeeze=False)
-    for ax, (fine, rec) in zip(axes[0], results.items(), strict=True):
-        for m, r in rec.items():
+    n = len(runs)
+    cols = min(n, 3)
+    rows = (n + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(5 * cols, 3.5 * rows), squeeze=False)
+    for ax, ((name, _grid), run) in zip(axes.ravel(), runs.items(), strict=False):
+        for m, r in run["rec"].items():
             ax.plot(r["wall_s"], marker="o", label=m)
-        ax.set_title(grid_label(fine))
+        ax.axhline(run["dt_s"], color="k", lw=0.8, ls="--", label="dt (real time)")
+        ax.set_title(f"{name}, {run['grid_label']}", fontsize=9)
         ax.set_xlabel("step after the checkpoint")
         ax.set_ylabel("wall time per step (s)")
         ax.set_yscale("log")
-        ax.legend()
+        ax.legend(fontsize=7)
+    for ax in axes.ravel()[n:]:
+        ax.set_visible(False)
     fig.tight_layout()
-    fig.savefig(RESULTS / "realtime.png", dpi=100)
+    fig.savefig(out / "realtime.png", dpi=100)
+    plt.close(fig)
+
+
+def measure(scene: Scene, path: Path, *, warmup: int, steps: int) -> dict[str, Any]:
+    """``scene`` warmed up (checkpoint ``path``), then every mode that applies in lockstep."""
+    path, first_cut = warm_up(scene, path, warmup)
+    return {
+        "rec": run_modes(path, modes_for(scene), steps),
+        "dt_s": scene.dt_s,
+        "first_cut": first_cut,
+        "nodes": int(np.prod(scene.node_shape)),
+        "grid_label": "x".join(map(str, scene.node_shape))
+        + (" graded" if scene.resolution is not None else " uniform"),
+    }
+
+
+def profile(a: argparse.Namespace, started: str) -> None:
+    """The incremental mode's steps under cProfile: top functions by own time."""
+    import cProfile
+    import pstats
+
+    lines = [
+        "# Real time: where a cutting step's time goes (incremental mode, cProfile)",
+        "",
+        f"`python benchmarks/realtime.py profile --scenes {' '.join(a.scenes)} --grids "
+        f"{' '.join(a.grids)} --steps {a.steps}` (started {started}, load average "
+        f"{os.getloadavg()[0]:.1f}): {a.steps} steps from the checkpoint two steps after the "
+        "first cut; the profiler inflates every call alike. Own time: in the function itself; "
+        "cumulative: with what it calls.",
+        "",
+    ]
+    for name in a.scenes:
+        for grid in a.grids:
+            scene = scene_on(name, grid)
+            path, _ = warm_up(scene, CACHE / f"{name}_{grid}.h5", a.warmup)
+            sim = load_as(path)
+            prof = cProfile.Profile()
+            prof.enable()
+            for _ in range(a.steps):
+                sim.step()
+            prof.disable()
+            st = pstats.Stats(prof)
+            total = max(v[3] for v in st.stats.values())  # type: ignore[attr-defined]
+            top = sorted(st.stats.items(), key=lambda kv: kv[1][2], reverse=True)[: a.top]  # type: ignore[attr-defined]
+            label = "x".join(map(str, scene.node_shape))
+            lines += [
+                f"## {name}, {label} ({'graded' if scene.resolution is not None else 'uniform'})",
+                "",
+                f"{total / a.steps:.2f} s per step under the profiler.",
+                "",
+                "| function | calls | own s per step | share | cumulative s per step |",
+                "|---|---|---|---|---|",
+            ]
+            for (file, line, fn), (_cc, nc, tt, ct, _callers) in top:
+                where = file.split("site-packages/")[-1].split("/server/")[-1]
+                lines.append(
+                    f"| `{fn}` ({where}:{line}) | {nc} | {tt / a.steps:.3f} | "
+                    f"{tt / total:.0%} | {ct / a.steps:.3f} |"
+                )
+            lines.append("")
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    (RESULTS / "realtime_profile.md").write_text("\n".join(lines))
+    print("\n".join(lines))
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
-    r = sub.add_parser("run", help="full vs incremental per step, with the errors")
-    r.add_argument(
-        "--grids", nargs="+", type=float, default=[0.0, 0.4], help="fine mm; 0: uniform 33x33x65"
-    )
-    r.add_argument("--steps", type=int, default=12)
+    for cmd, help_, steps in (
+        ("run", "full vs incremental per step, with the errors", 8),
+        ("profile", "cProfile of the incremental mode's steps", 6),
+    ):
+        r = sub.add_parser(cmd, help=help_)
+        r.add_argument("--scenes", nargs="+", choices=SCENES, default=list(SCENES))
+        r.add_argument("--grids", nargs="+", choices=("own", "uniform"), default=["own", "uniform"])
+        r.add_argument("--steps", type=int, default=steps)
+        r.add_argument("--warmup", type=int, default=60, help="steps at most before the cut")
+        r.add_argument("--top", type=int, default=15, help="profile: functions listed")
     s = sub.add_parser("solvers", help="per-saving cost of a cutting step")
     s.add_argument("--grids", nargs="+", type=float, default=[0.0, 0.5], help="0: uniform")
     s.add_argument("--steps", type=int, default=6)
@@ -243,8 +361,15 @@ def main() -> None:
     a = ap.parse_args()
     started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     if a.cmd == "run":
-        runs = {fine: run_modes(checkpoint(fine), fine, a.steps) for fine in a.grids}
-        write_run(runs, a, started, scene_for(0.0, moving=False).dt_s)
+        runs = {
+            (n, g): measure(scene_on(n, g), CACHE / f"{n}_{g}.h5", warmup=a.warmup, steps=a.steps)
+            for n in a.scenes
+            for g in a.grids
+        }
+        write_run(runs, a, started)
+        return
+    if a.cmd == "profile":
+        profile(a, started)
         return
     results: dict[float, dict[str, list[dict[str, float]]]] = {}
     for fine in a.grids:

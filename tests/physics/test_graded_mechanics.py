@@ -8,7 +8,8 @@ import pytest
 
 from diathermy.fem.elastic import eigenstress_load, lame_parameters
 from diathermy.mesh import Grid, TetMesh, build_tet_mesh
-from diathermy.physics.mechanics import Constraints, MechanicsSolver, rollers
+from diathermy.physics.constraints import Constraints, rollers
+from diathermy.physics.mechanics import MechanicsSolver
 from diathermy.physics.strain_energy import strain_energy_density
 
 E, NU, P0, DP = 0.27e6, 0.4, 101325.0, 2e4

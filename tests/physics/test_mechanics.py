@@ -8,13 +8,9 @@ import pytest
 from diathermy.errors import SceneError, SolverDivergedError
 from diathermy.fem.elastic import eigenstress_load, lame_parameters, strain
 from diathermy.mesh import Grid, build_tet_mesh
-from diathermy.physics.mechanics import (
-    Constraints,
-    MechanicsSolver,
-    clamped_bottom,
-    find_fragments,
-    rollers,
-)
+from diathermy.physics.constraints import Constraints, clamped_bottom, rollers
+from diathermy.physics.fragments import find_fragments
+from diathermy.physics.mechanics import MechanicsSolver
 from diathermy.physics.strain_energy import strain_energy_density
 
 E, NU, P0 = 0.27e6, 0.4, 101325.0
@@ -222,3 +218,41 @@ def test_errors():
         solver.solve(np.zeros(3))
     with pytest.raises(SolverDivergedError):
         solver.solve(P0 + np.linspace(0, 1e5, mesh.n_nodes))
+
+
+@pytest.mark.parametrize("graded", [False, True])
+def test_updated_stiffness_equals_a_fresh_build_bit_for_bit(graded):
+    """A cut of a few tets updates the previous operator in place of assembling it again, and
+    the matrix, its scaling and the solution are exactly those of a fresh build."""
+    if graded:
+        grid, radii = Grid.graded((0.08, 0.03, 0.06), (0.12, 0.07, 0.1), 0.005), (6e-3, 1e-2, 0.014)
+    else:
+        grid, radii = Grid((9, 9, 17)), (0.012, 0.02, 0.03)
+    mesh = build_tet_mesh(grid)
+    c = mesh.centroids()
+    base = MechanicsSolver(mesh, E, NU)
+    solver = base
+    for radius in radii:  # a growing crater: a chain of updates
+        healthy = np.linalg.norm(c - [0.1, 0.05, 0.1], axis=1) > radius
+        Ee = np.where(healthy, E, 1e-6 * E)
+        solver = MechanicsSolver(
+            mesh, Ee, NU, healthy=healthy, assembler=base.assembler, base=solver
+        )
+        fresh = MechanicsSolver(mesh, Ee, NU, healthy=healthy, assembler=base.assembler)
+        assert solver.updated and not fresh.updated
+        assert np.array_equal(solver.K.data, fresh.K.data)
+        assert np.array_equal(solver.scale, fresh.scale)
+        p = P0 + DP * healthy.any() * np.ones(mesh.n_nodes)
+        assert np.array_equal(solver.solve(p).u, fresh.solve(p).u)
+
+
+def test_update_falls_back_to_a_fresh_build():
+    mesh = build_tet_mesh(Grid((5, 5, 9)))
+    base = MechanicsSolver(mesh, E, NU)
+    everything = MechanicsSolver(mesh, 0.5 * E, NU, assembler=base.assembler, base=base)
+    assert not everything.updated  # every tet changed: assembled anew
+    lifted = Constraints.on_nodes(mesh.side_nodes("z-"), value_m=1e-4)
+    moved = MechanicsSolver(mesh, E, NU, lifted, assembler=base.assembler, base=base)
+    assert not moved.updated  # nonzero prescribed values: the lift needs the whole K
+    other_nu = MechanicsSolver(mesh, E, 0.3, assembler=base.assembler, base=base)
+    assert not other_nu.updated

@@ -68,24 +68,8 @@ class ElasticAssembler:
         n_tets = self.geom.volumes.shape[0]
         E = np.ascontiguousarray(np.broadcast_to(np.asarray(youngs_modulus, float), (n_tets,)))
         if self.gather is not None:
-            assert self.reference_tets is not None and self.gather_tet is not None
-            ref = self.reference_tets
-            g = ElementGeometry(self.geom.grads[ref], self.geom.volumes[ref])
-            K_ref = elastic_local(g, 1.0, nu).reshape(ref.size * 16, 9)
-            if self.cell_factors is None:
-                np.take(E, self.gather_tet, out=self.gather.data)
-                data = self.gather @ K_ref
-            else:
-                assert self.unit_grads is not None
-                R = graded_reference(self.unit_grads, nu)
-                by_component = np.zeros((9, self.pattern.nnz))
-                for m in range(6):  # factor m feeds 3 (diagonal) or 2 (off-diagonal) components
-                    cols = np.flatnonzero(np.any(R[m] != 0.0, axis=0))
-                    self.gather.data[:] = (E * self.cell_factors[:, m])[self.gather_tet]
-                    part = self.gather @ R[m][:, cols]
-                    for i, c in enumerate(cols):
-                        by_component[c] += part[:, i]
-                data = by_component.T
+            assert self.gather_tet is not None
+            data = self._gathered(self.gather, self.gather_tet, E, nu)
         else:
             K = elastic_local(self.geom, E, nu).reshape(n_tets * 16, 9)
             slot = self.pattern.slot.ravel()
@@ -96,6 +80,47 @@ class ElasticAssembler:
         return sp.bsr_matrix(
             (data.reshape(-1, 3, 3), self.pattern.indices, self.pattern.indptr), shape=(n, n)
         )
+
+    def stiffness_blocks(
+        self, youngs_modulus: np.ndarray, nu: float, blocks: np.ndarray
+    ) -> np.ndarray | None:
+        """The stored 3x3 blocks ``blocks`` (m,) of ``stiffness(E, nu)``, (m, 3, 3), bit for bit
+        (each block sums its tets in the same order); None without a gather plan."""
+        if self.gather is None:
+            return None
+        assert self.gather_tet is not None
+        g = self.gather
+        starts, counts = g.indptr[blocks], g.indptr[blocks + 1] - g.indptr[blocks]
+        indptr = np.concatenate([[0], np.cumsum(counts)])
+        entries = np.repeat(starts - indptr[:-1], counts) + np.arange(int(indptr[-1]))
+        sub = sp.csr_matrix(
+            (np.zeros(entries.size), g.indices[entries], indptr), shape=(blocks.size, g.shape[1])
+        )
+        E = np.ascontiguousarray(youngs_modulus, dtype=float)
+        return self._gathered(sub, self.gather_tet[entries], E, nu).reshape(-1, 3, 3)
+
+    def _gathered(
+        self, gather: sp.csr_matrix, gather_tet: np.ndarray, E: np.ndarray, nu: float
+    ) -> np.ndarray:
+        """BSR data (rows of ``gather``, 9) of the Kuhn-mesh stiffness: ``gather`` (its data
+        overwritten) maps blocks to (shape, a, b) combinations, ``gather_tet`` its entries' tets."""
+        assert self.reference_tets is not None
+        if self.cell_factors is None:
+            ref = self.reference_tets
+            g = ElementGeometry(self.geom.grads[ref], self.geom.volumes[ref])
+            K_ref = elastic_local(g, 1.0, nu).reshape(ref.size * 16, 9)
+            np.take(E, gather_tet, out=gather.data)
+            return gather @ K_ref
+        assert self.unit_grads is not None
+        R = graded_reference(self.unit_grads, nu)
+        by_component = np.zeros((9, gather.shape[0]))
+        for m in range(6):  # factor m feeds 3 (diagonal) or 2 (off-diagonal) components
+            cols = np.flatnonzero(np.any(R[m] != 0.0, axis=0))
+            gather.data[:] = (E * self.cell_factors[:, m])[gather_tet]
+            part = gather @ R[m][:, cols]
+            for i, c in enumerate(cols):
+                by_component[c] += part[:, i]
+        return by_component.T
 
 
 def elastic_assembler(

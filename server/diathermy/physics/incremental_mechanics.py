@@ -45,12 +45,13 @@ class IncrementalSettings:
     patch_threshold: float = 0.1
     patch_layers: int = 2
     patch_max_nodes: int = 4000
+    patch_rounds: int = 3
     patch: bool = True  # mechanics.correction: 'patch', or 'none' (the Ritz-scaled start as is)
     switch_residual: float = DEFAULT_SWITCH_RESIDUAL  # predictor 'auto': when to ask the network
 
     def __post_init__(self) -> None:
-        if not self.guard_tolerance > 0 or self.full_every < 1:
-            raise ValueError("guard_tolerance must be > 0 and full_every >= 1")
+        if not self.guard_tolerance > 0 or self.full_every < 1 or self.patch_rounds < 1:
+            raise ValueError("guard_tolerance must be > 0, full_every and patch_rounds >= 1")
 
 
 @dataclass(frozen=True)
@@ -77,24 +78,28 @@ def local_solve(
     with load f (n_nodes, 3) N; residuals over the free DOFs. ``u_prev`` (n_nodes, 3) m: the
     warm start, whose constrained values the start zeroed (they count as moved)."""
     free = ~solver.constrained.reshape(-1, 3)
-    nodes = np.zeros(0, dtype=np.int64)
-    if settings.patch:
+    u, Ku = start.u, start.Ku
+    moved = np.zeros(0, dtype=np.int64)
+    first = after = start.residual
+    for _ in range(settings.patch_rounds if settings.patch else 0):
+        # each round patches where the last one left off
         nodes = residual_patch(
-            np.where(free, f - start.Ku, 0.0),
+            np.where(free, f - Ku, 0.0),
             graph,
             threshold=settings.patch_threshold,
             layers=settings.patch_layers,
             max_nodes=settings.patch_max_nodes,
         )
-    patched = patch_correct(solver.K, f, start.u, start.Ku, free, nodes)
-    moved = nodes if patched.nodes else nodes[:0]
+        patched = patch_correct(solver.K, f, u, Ku, free, nodes)
+        u, Ku, after = patched.u, patched.Ku, patched.residual_after
+        if patched.nodes:
+            moved = np.union1d(moved, nodes)
+        if after <= settings.guard_tolerance or not patched.nodes:
+            break
     if u_prev is not None:
         held = np.flatnonzero(np.any(~free & (u_prev != 0), axis=1))  # zeroed constrained values
         moved = np.union1d(moved, held)
-    return LocalSolve(
-        patched.u, patched.residual_after, patched.residual_before, moved, start.ritz_scale,
-        start.name,
-    )  # fmt: skip
+    return LocalSolve(u, after, first, moved, start.ritz_scale, start.name)
 
 
 class IncrementalFEMBackend:

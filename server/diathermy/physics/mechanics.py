@@ -20,12 +20,11 @@ then held only by the ersatz material (1e-6 E), which is nonsingular but slows C
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from diathermy.errors import SceneError
 from diathermy.fem.elastic import (
@@ -38,6 +37,8 @@ from diathermy.fem.geometry import ElementGeometry, structured_geometry
 from diathermy.fem.solvers import KrylovSolver
 from diathermy.fem.sparsity import build_pattern
 from diathermy.mesh import TetMesh
+from diathermy.physics.constraints import Constraints, clamped_bottom
+from diathermy.physics.fragments import find_fragments
 
 _CHEBYSHEV = ("chebyshev", {"degree": 3})
 DEFAULT_AMG_OPTIONS: dict[str, Any] = {
@@ -47,58 +48,9 @@ DEFAULT_AMG_OPTIONS: dict[str, Any] = {
     "coarse_solver": "pinv",
 }
 """Smoothed aggregation for the 3x3-block elasticity matrix (measured in benchmarks/mechanics.py)."""
-
-
-@dataclass(frozen=True)
-class Constraints:
-    """Prescribed displacement components: DOF ``3 * node + i`` held at ``values`` (m)."""
-
-    dofs: np.ndarray
-    values: np.ndarray
-
-    def __post_init__(self) -> None:
-        dofs = np.asarray(self.dofs, dtype=np.int64).ravel()
-        values = np.broadcast_to(np.asarray(self.values, dtype=float), dofs.shape)
-        if not np.all(np.isfinite(values)):
-            raise SceneError("constraint values must be finite")
-        dofs, first = np.unique(dofs, return_index=True)  # later duplicates are dropped
-        object.__setattr__(self, "dofs", dofs)
-        object.__setattr__(self, "values", np.ascontiguousarray(values[first]))
-
-    @classmethod
-    def on_nodes(
-        cls, nodes: np.ndarray, components: tuple[int, ...] = (0, 1, 2), value_m: float = 0.0
-    ) -> Constraints:
-        """Hold the given components (0 x, 1 y, 2 z) of ``nodes`` at ``value_m``."""
-        comps = np.asarray(components, dtype=np.int64)
-        dofs = 3 * np.asarray(nodes, dtype=np.int64)[:, None] + comps[None, :]
-        return cls(dofs.ravel(), np.full(dofs.size, value_m))
-
-    def __add__(self, other: Constraints) -> Constraints:
-        return Constraints(
-            np.concatenate([self.dofs, other.dofs]), np.concatenate([self.values, other.values])
-        )
-
-    def mask(self, n_dofs: int) -> np.ndarray:
-        """Boolean (n_dofs,) of the constrained DOFs."""
-        if self.dofs.size and (self.dofs[0] < 0 or self.dofs[-1] >= n_dofs):
-            raise SceneError(f"constrained DOFs must lie in [0, {n_dofs})")
-        out = np.zeros(n_dofs, dtype=bool)
-        out[self.dofs] = True
-        return out
-
-
-def clamped_bottom(mesh: TetMesh) -> Constraints:
-    """u = 0 on the bottom z- (the tissue lies on the dispersive electrode)."""
-    return Constraints.on_nodes(mesh.side_nodes("z-"))
-
-
-def rollers(mesh: TetMesh, sides: tuple[str, ...]) -> Constraints:
-    """Zero normal displacement on each named side (``x-``, ``y+``, ...); tangential free."""
-    out = Constraints(np.zeros(0, dtype=np.int64), np.zeros(0))
-    for side in sides:
-        out = out + Constraints.on_nodes(mesh.side_nodes(side), ("xyz".index(side[0]),))
-    return out
+MAX_UPDATED_TETS = 0.05
+"""A new topology updates the previous stiffness when at most this fraction of tets changed E
+(a cut step changes a few dozen); above it assembling anew is as cheap."""
 
 
 @dataclass(frozen=True)
@@ -122,67 +74,30 @@ class MechanicsResult:
     stats: MechanicsStats
 
 
-@dataclass(frozen=True)
-class Fragments:
-    """Face-connected components of the healthy tets and which of them float."""
+def constrain_blocks(
+    data: np.ndarray, rows: np.ndarray, cols: np.ndarray, constrained: np.ndarray
+) -> np.ndarray:
+    """3x3 blocks (m, 3, 3) of K at block rows/cols (m,) with the rows and columns of the
+    constrained DOFs (bool (n_nodes, 3)) zeroed and their diagonal kept; a new array."""
+    out = data * ~(constrained[rows][:, :, None] | constrained[cols][:, None, :])
+    on_diag = np.flatnonzero(rows == cols)
+    idx = np.arange(3)
+    diag_blocks = out[on_diag]
+    kept = constrained[rows[on_diag]]
+    diag_blocks[:, idx, idx] = np.where(kept, data[on_diag][:, idx, idx], diag_blocks[:, idx, idx])
+    out[on_diag] = diag_blocks
+    return out
 
-    labels: np.ndarray  # (n_tets,) component of each healthy tet, -1 elsewhere
-    n_components: int
-    loose: np.ndarray = field(repr=False)  # (n_tets,) healthy tets of unanchored components
 
-
-def find_fragments(
-    mesh: TetMesh, healthy: np.ndarray, constrained: np.ndarray, *, tol: float = 1e-9
-) -> Fragments:
-    """Components of the healthy-tet face graph; a component is anchored when the constrained
-    DOFs (bool (3 n_nodes,)) on its nodes fix all 6 rigid-body modes (rank-6 Gram matrix)."""
-    healthy = np.asarray(healthy, dtype=bool)
-    ids = np.flatnonzero(healthy)
-    local = np.full(mesh.n_tets, -1, dtype=np.int64)
-    local[ids] = np.arange(ids.size)
-    nb = mesh.neighbours[ids]
-    keep = nb >= 0
-    keep[keep] = healthy[nb[keep]]
-    rows = np.repeat(np.arange(ids.size), 4).reshape(-1, 4)[keep]
-    graph = sp.csr_matrix((np.ones(rows.size), (rows, local[nb[keep]])), (ids.size, ids.size))
-    n_comp, comp = connected_components(graph, directed=False)
-    labels = np.full(mesh.n_tets, -1, dtype=np.int64)
-    labels[ids] = comp
-    # (component, node) pairs, then the Gram matrix of the rigid modes at constrained DOFs.
-    pairs = np.unique(comp[:, None] * np.int64(mesh.n_nodes) + mesh.tets[ids])
-    pc, pn = np.divmod(pairs, mesh.n_nodes)
-    B = rigid_body_modes(mesh.points).reshape(mesh.n_nodes, 3, 6)
-    cm = constrained.reshape(-1, 3)[pn]  # (n_pairs, 3)
-    gram = np.zeros(n_comp * 36)
-    for i in range(3):
-        sel = cm[:, i]
-        Bi = B[pn[sel], i]
-        slots = pc[sel][:, None] * 36 + np.arange(36)
-        gram += np.bincount(
-            slots.ravel(), (Bi[:, :, None] * Bi[:, None, :]).ravel(), minlength=gram.size
-        )
-    gram = gram.reshape(n_comp, 6, 6)
-    smallest = np.linalg.eigvalsh(gram)[:, 0]
-    scale = np.trace(gram, axis1=1, axis2=2).max(initial=0.0)
-    anchored = smallest > tol * max(scale, 1.0)
-    loose = np.zeros(mesh.n_tets, dtype=bool)
-    loose[ids] = ~anchored[comp]
-    return Fragments(labels, n_comp, loose)
+def block_rows(K: sp.bsr_matrix) -> np.ndarray:
+    """Block row of each stored 3x3 block of ``K``."""
+    return np.repeat(np.arange(K.indptr.size - 1), np.diff(K.indptr))
 
 
 def _constrain(K: sp.bsr_matrix, constrained: np.ndarray) -> np.ndarray:
     """Zero the rows and columns of constrained DOFs in place, keep their diagonal; returns it."""
     diag = K.diagonal()
-    n_blocks = K.indptr.size - 1
-    rows = np.repeat(np.arange(n_blocks), np.diff(K.indptr))
-    cm = constrained.reshape(-1, 3)
-    K.data *= ~(cm[rows][:, :, None] | cm[K.indices][:, None, :])
-    on_diag = np.flatnonzero(rows == K.indices)
-    blocks = K.data[on_diag]  # (n_blocks, 3, 3) view-free copy, written back below
-    idx = np.arange(3)
-    d = diag.reshape(-1, 3)[rows[on_diag]]
-    blocks[:, idx, idx] = np.where(cm[rows[on_diag]], d, blocks[:, idx, idx])
-    K.data[on_diag] = blocks
+    K.data[:] = constrain_blocks(K.data, block_rows(K), K.indices, constrained.reshape(-1, 3))
     return diag
 
 
@@ -203,6 +118,9 @@ class MechanicsSolver:
         krylov: the CG solver of an earlier topology of this mesh: it takes this operator and
             keeps its hierarchy while that pays (``KrylovSolver.stale_factor``); rtol, maxiter
             and amg_options are then its own.
+        base: the solver of an earlier topology of this mesh, nu and (zero-valued)
+            constraints: the blocks of the tets whose E changed are assembled again and the
+            rest of its stiffness is kept; bit for bit the matrix a fresh build gives.
     """
 
     def __init__(
@@ -220,6 +138,7 @@ class MechanicsSolver:
         amg_options: dict[str, Any] | None = None,
         assembler: ElasticAssembler | None = None,
         krylov: KrylovSolver | None = None,
+        base: MechanicsSolver | None = None,
     ) -> None:
         t0 = time.perf_counter()
         self.mesh = mesh
@@ -235,7 +154,9 @@ class MechanicsSolver:
             healthy = E >= 1e-3 * E.max()
         healthy = np.asarray(healthy, dtype=bool)
         B = rigid_body_modes(mesh.points)
-        if np.linalg.matrix_rank(B[self.constrained]) < 6:
+        if base is not None and not base.updatable_to(self):
+            base = None
+        if base is None and np.linalg.matrix_rank(B[self.constrained]) < 6:
             raise SceneError("the constraints leave rigid-body motions of the block free")
         self.fragments = find_fragments(mesh, healthy, self.constrained)
         if loose_fragments == "remove" and self.fragments.loose.any():
@@ -245,11 +166,17 @@ class MechanicsSolver:
             raise ValueError(f"loose_fragments must be 'remove' or 'keep', got {loose_fragments!r}")
         self.youngs_modulus_pa = E
         self.healthy = healthy
-        K = self.assembler.stiffness(E, self.poisson_ratio)
-        K_values = np.zeros(n_dofs)
-        K_values[self.constraints.dofs] = self.constraints.values
-        self._lift = K @ K_values if np.any(K_values) else None
-        diag = _constrain(K, self.constrained)
+        K = None if base is None else base.updated_stiffness(E)
+        self.updated = K is not None
+        if K is None:
+            K = self.assembler.stiffness(E, self.poisson_ratio)
+            K_values = np.zeros(n_dofs)
+            K_values[self.constraints.dofs] = self.constraints.values
+            self._lift = K @ K_values if np.any(K_values) else None
+            diag = _constrain(K, self.constrained)
+        else:
+            self._lift = None
+            diag = K.diagonal()
         self._constrained_rhs = diag[self.constraints.dofs] * self.constraints.values
         self.K = K
         # Symmetric Jacobi scaling D^-1/2 K D^-1/2: unit diagonal, so the smoother sees the
@@ -271,6 +198,36 @@ class MechanicsSolver:
         self._krylov.near_nullspace = B
         self._krylov.set_operator(K_scaled)
         self.assembly_s = time.perf_counter() - t0
+
+    def updatable_to(self, other: MechanicsSolver) -> bool:
+        """Whether ``other`` may take this solver's stiffness and update it (same mesh,
+        assembler, nu and constraints, all held at zero)."""
+        return (
+            other.mesh is self.mesh
+            and other.assembler is self.assembler
+            and other.poisson_ratio == self.poisson_ratio
+            and self._lift is None
+            and not np.any(other.constraints.values)
+            and np.array_equal(other.constraints.dofs, self.constraints.dofs)
+        )
+
+    def updated_stiffness(self, youngs_modulus_pa: np.ndarray) -> sp.bsr_matrix | None:
+        """This constrained K with the blocks of the tets whose E (n_tets,) Pa changed assembled
+        again (None when more than ``MAX_UPDATED_TETS`` of them changed, or no plan)."""
+        changed = np.flatnonzero(youngs_modulus_pa != self.youngs_modulus_pa)
+        if changed.size > MAX_UPDATED_TETS * youngs_modulus_pa.size:
+            return None
+        K = self.K.copy()
+        if changed.size == 0:
+            return K
+        blocks = np.unique(self.assembler.pattern.slot[changed])
+        data = self.assembler.stiffness_blocks(youngs_modulus_pa, self.poisson_ratio, blocks)
+        if data is None:
+            return None
+        rows = np.searchsorted(K.indptr, blocks, side="right") - 1
+        cm = self.constrained.reshape(-1, 3)
+        K.data[blocks] = constrain_blocks(data, rows, K.indices[blocks], cm)
+        return K
 
     @property
     def krylov(self) -> KrylovSolver:

@@ -164,6 +164,7 @@ class FEMBackend:
             rtol=self.rtol,
             assembler=self.assembler,
             krylov=self._krylov,
+            base=self._solver,
         )
         self._E = youngs_modulus_pa.copy()
         self.n_builds += 1

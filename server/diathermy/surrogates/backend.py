@@ -26,6 +26,7 @@ from diathermy.errors import CheckpointError, SceneError
 from diathermy.fem.elastic import ElasticAssembler, eigenstress_load
 from diathermy.fem.geometry import structured_geometry
 from diathermy.mesh import TetMesh
+from diathermy.physics.constraints import clamped_bottom
 from diathermy.physics.equilibrium_guard import (
     GuardPreconditioner,
     GuardPreconditioners,
@@ -34,7 +35,7 @@ from diathermy.physics.equilibrium_guard import (
     relative_residual,
     ritz_scale,
 )
-from diathermy.physics.mechanics import MechanicsSolver, clamped_bottom
+from diathermy.physics.mechanics import MechanicsSolver
 from diathermy.physics.mechanics_backend import FEMBackend, MechanicsOutput
 from diathermy.physics.patch_correction import node_graph, patch_correct, residual_patch
 from diathermy.surrogates.checkpoint import load_checkpoint
