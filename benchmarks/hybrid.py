@@ -11,9 +11,12 @@ uniform ``grid``, 33x33x65, the shipped CNN's):
    residual guard are evaluated on exactly that step's (p, phi, topology), and their strain
    energy W is compared with the FEM's (``relative_strain_energy_error``): the surrogate error,
    isolated from coupling;
-2. three fully coupled hybrid runs (CNN, CNN + patch, CNN + patch + guard) of the same scene;
-   their drift is the same error of W against the FEM run at the same step, plus the cut
-   volumes.
+   Beside them, the baseline (issue #22): persistence, the FEM run's previous displacement
+   Ritz-scaled on the step's system, alone and with the same patch;
+2. six fully coupled runs of the same scene: CNN, CNN + patch, CNN + patch + guard, and
+   persistence (the engine's incremental FEM without its full-solve interval) alone, + patch
+   and + patch + guard; their drift is the same error of W against the FEM run at the same
+   step, plus the cut volumes.
 Times are measured in the same process: the mechanics effect of each run and whole steps; ratios
 FEM / hybrid are medians over the steps where mechanics ran. Writes benchmarks/results/hybrid.md,
 hybrid.png and hybrid.json.
@@ -34,6 +37,8 @@ from typing import Any
 import numpy as np
 
 RESULTS = Path(__file__).resolve().parent / "results"
+NO_GUARD = 1e30
+"""Persistence's guard tolerance when it has none: every prediction is accepted, as the CNN's."""
 
 
 def _peak_rss_mb() -> float:
@@ -49,6 +54,8 @@ def run_scene(name: Any, steps: int, model: str | None, guard_tol: float) -> dic
 
     from diathermy.engine.simulation import Simulation
     from diathermy.physics.materials import ersatz_youngs_modulus
+    from diathermy.physics.patch_correction import node_graph
+    from diathermy.physics.predictor_errors import StepSystem, score_start
     from diathermy.physics.strain_energy import (
         relative_strain_energy_error,
         strain_energy_density,
@@ -84,9 +91,11 @@ def run_scene(name: Any, steps: int, model: str | None, guard_tol: float) -> dic
     rows: list[dict[str, Any]] = []
     fem_steps: list[dict[str, float]] = []
     fem_history: dict[int, dict[str, Any]] = {}
+    graph = None
     for _ in range(steps):
         phi = fem.state["level_set"].copy()
         healthy = ~fem.state["removed"]  # the topology the step's mechanics sees
+        u_prev = fem.state["displacement"].copy()  # persistence: the previous step's answer
         E = ersatz_youngs_modulus(healthy, t.youngs_modulus_pa, t.ersatz_stiffness_ratio)
         rep = fem.step()
         mech = rep.effects["mechanics"]
@@ -122,19 +131,47 @@ def run_scene(name: Any, steps: int, model: str | None, guard_tol: float) -> dic
             row[f"{label}_residual_after"] = out.extra["residual_after"]
             row[f"{label}_iterations"] = out.iterations
             row[f"{label}_patch_nodes"] = out.extra["patch_nodes"]
+        # the baseline (issue #22): the previous displacement, Ritz-scaled, alone and patched,
+        # on the FEM run's own operator of this step
+        solver = fem.mechanics.solver
+        if graph is None:
+            graph = node_graph(solver.K)
+        system = StepSystem.of(solver, p, t.p_atm_pa, graph)
+        for s in score_start(
+            system, "previous", lambda u_prev=u_prev: u_prev,
+            lambda u, E_eff=E_eff: strain_energy_density(grads, tets, u, E_eff, t.poisson_ratio),
+            W_ref,
+            threshold=scene.mechanics.patch_threshold, layers=scene.mechanics.patch_layers,
+        ):  # fmt: skip
+            key = "prev" if s.name == "previous" else "prevpatch"
+            row[f"{key}_error"], row[f"{key}_s"] = s.error, s.cost_s
+            row[f"{key}_residual_after"], row[f"{key}_patch_nodes"] = s.residual, s.patch_nodes
         rows.append(row)
         fem_history[rep.step] = {"W": W_ref.copy(), "cut_volume_m3": rep.cut_volume_m3}
     # coupled runs: the hybrid drives its own cut; compare W with the FEM run step by step
     coupled = {}
     for label, tol, correction in (
-        ("cnn", None, "none"), ("patch", None, "patch"), ("guard", guard_tol, "patch")
+        ("cnn", None, "none"), ("patch", None, "patch"), ("guard", guard_tol, "patch"),
+        ("prev", None, "none"), ("prevpatch", None, "patch"), ("prevguard", guard_tol, "patch"),
     ):  # fmt: skip
-        mech_cfg = {
+        mech_cfg: dict[str, Any] = {
             "backend": "cnn", "model": model_path, "guard_tolerance": tol,
             "correction": correction,
         }  # fmt: skip
+        solver_cfg = scene.solver
+        if label.startswith("prev"):  # persistence: the engine's incremental FEM, no interval
+            mech_cfg = {
+                "backend": "fem", "predictor": "previous", "correction": correction,
+                "guard_tolerance": tol or NO_GUARD, "full_every": 10000,
+            }  # fmt: skip
+            solver_cfg = scene.solver.model_copy(update={"incremental": True})
         sim = Simulation(
-            scene.model_copy(update={"mechanics": scene.mechanics.model_copy(update=mech_cfg)})
+            scene.model_copy(
+                update={
+                    "mechanics": scene.mechanics.model_copy(update=mech_cfg),
+                    "solver": solver_cfg,
+                }
+            )
         )
         drift, times = [], []
         for _ in range(steps):
@@ -187,7 +224,10 @@ def _full_step(part: dict[str, Any], label: str) -> float:
     return statistics.median(s) if s else float("nan")
 
 
-RUNS = {"cnn": "CNN", "patch": "CNN+patch", "guard": "CNN+patch+guard"}
+RUNS = {
+    "cnn": "CNN", "patch": "CNN+patch", "guard": "CNN+patch+guard", "prev": "previous",
+    "prevpatch": "previous+patch", "prevguard": "previous+patch+guard",
+}  # fmt: skip
 """The coupled runs' labels in the report."""
 
 
@@ -214,6 +254,46 @@ def _per_step_line(part: dict[str, Any]) -> str:
         f"{statistics.median(x['cnn_residual_before'] for x in r):.3f} / "
         f"{statistics.median(x['patch_residual_after'] for x in r):.3f} |"
     )
+
+
+def _baseline_lines(parts: list[dict[str, Any]]) -> list[str]:
+    """The network beside persistence (issue #22) on the same steps: error and cost."""
+    with_prev = [p for p in parts if p["rows"] and "prev_error" in p["rows"][0]]
+    if not with_prev:
+        return []
+    lines = [
+        "",
+        "## The baseline: persistence beside the network (same steps, same states)",
+        "",
+        "previous: the FEM run's displacement of the step before, Ritz-scaled on this step's "
+        "system; previous+patch: then the same patch correction as CNN+patch. Max / mean "
+        "strain-energy error over the steps; cost: median s per step (prediction, Ritz scale, "
+        "patch; the operator is shared).",
+        "",
+        "| scene | grid | steps | CNN | previous | CNN+patch | previous+patch | "
+        "cost CNN / previous | cost CNN+patch / previous+patch | patch nodes CNN / previous "
+        "(median) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for part in with_prev:
+        r = part["rows"]
+
+        def e(key: str, r: list[dict[str, Any]] = r) -> str:
+            a = np.array([x[f"{key}_error"] for x in r])
+            return f"{a.max():.4f} / {a.mean():.4f}"
+
+        def c(key: str, r: list[dict[str, Any]] = r) -> float:
+            return statistics.median(x[f"{key}_s"] for x in r)
+
+        g = "x".join(map(str, part["grid"]))
+        nodes_cnn = statistics.median(x["patch_patch_nodes"] for x in r)
+        nodes_prev = statistics.median(x["prevpatch_patch_nodes"] for x in r)
+        lines.append(
+            f"| {part['scene']} | {g} | {len(r)} | {e('cnn')} | {e('prev')} | **{e('patch')}** | "
+            f"**{e('prevpatch')}** | {c('cnn'):.3f} / {c('prev'):.3f} | "
+            f"{c('patch'):.3f} / {c('prevpatch'):.3f} | {nodes_cnn:.0f} / {nodes_prev:.0f} |"
+        )
+    return lines
 
 
 def write_report(parts: list[dict[str, Any]], out_dir: Path, wall_s: float) -> None:
@@ -261,6 +341,7 @@ def write_report(parts: list[dict[str, Any]], out_dir: Path, wall_s: float) -> N
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     lines += [_per_step_line(part) for part in parts]
+    lines += _baseline_lines(parts)
     lines += [
         "",
         "## Coupled hybrid runs: drift against the FEM run",

@@ -42,8 +42,15 @@ def test_hybrid_benchmark_runs_a_tiny_scene_and_writes_its_report(tmp_path: Path
         assert row["guard_error"] <= row["raw_error"] + 1e-12  # the guard only ever helps
         assert row["guard_residual_after"] <= 1e-3
         assert row["patch_patch_nodes"] > 0 and row["cnn_patch_nodes"] == 0
-    assert set(part["coupled"]) == {"cnn", "patch", "guard"}
+        # persistence beside the network: the patch only ever brings it nearer equilibrium
+        assert 0.0 <= row["prevpatch_error"] and row["prevpatch_s"] >= 0.0
+        assert row["prevpatch_residual_after"] <= row["prev_residual_after"] + 1e-12
+    assert part["rows"][0]["prev_error"] == 1.0  # the first mechanics step: persistence has u = 0
+    assert max(r["prev_error"] for r in part["rows"][1:]) < 1.0
+    assert set(part["coupled"]) == {"cnn", "patch", "guard", "prev", "prevpatch", "prevguard"}
     bench.write_report([part], tmp_path, wall_s=1.0)
     report = (tmp_path / "hybrid.md").read_text()
     assert scene.name in report and "| CNN+patch+guard |" in report
+    assert "| previous+patch |" in report  # the coupled persistence run
+    assert "persistence beside the network" in report
     assert (tmp_path / "hybrid.png").stat().st_size > 0

@@ -21,3 +21,19 @@ def test_surrogates_add_their_guarded_and_enriched_variants() -> None:
     assert names["pgd-30+enrich1e-1"].backend == "pgd"
     assert names["pgd-30+enrich1e-1"].guard_tolerance == 0.1
     assert all(v.backend == "fem" for v in default_variants() if v.name.startswith("fem"))
+
+
+def test_persistence_stands_beside_the_network_in_the_same_table() -> None:
+    """'previous' and 'previous+patch' (no guard, no interval), as 'cnn' and 'cnn+patch'."""
+    names = {v.name: v for v in default_variants({"cnn-w8": "m.pt"})}
+    scene = builtin_scene("fixed-electrode")
+    alone = names["previous"].apply(scene, 5)
+    patched = names["previous+patch"].apply(scene, 5)
+    for s in (alone, patched):
+        assert s.solver.incremental and s.mechanics.backend == "fem"
+        assert s.mechanics.predictor == "previous" and s.mechanics.full_every == 10000
+        assert s.mechanics.guard_tolerance is not None and s.mechanics.guard_tolerance > 1e9
+    assert alone.mechanics.correction == "none" and patched.mechanics.correction == "patch"
+    # the engine's incremental default keeps its patch
+    assert names["fem-incremental"].apply(scene, 5).mechanics.correction == "patch"
+    assert {"cnn-w8+patch", "previous+patch"} <= set(names)

@@ -107,9 +107,14 @@ def test_evaluate_reports_strain_energy_errors(
     report = tmp_path / "eval.json"
     assert main(["evaluate", str(out), str(tiny_dataset), "--subset", "validation",
                  "--json", str(report)]) == 0  # fmt: skip
-    assert "strain-energy error mean" in capsys.readouterr().out
+    out_text = capsys.readouterr().out
+    assert "strain-energy error mean" in out_text and "beside persistence" in out_text
     data = json.loads(report.read_text())
     assert data["summary"]["samples"] == 8  # 2 validation scenarios x 4 steps
+    base = data["baseline"]  # the persistence rows beside the network's, alone and patched
+    assert set(base) == {"cnn", "cnn+patch", "previous", "previous+patch"}
+    assert base["cnn"]["samples"] == 8 and base["previous"]["samples"] == 6  # no first samples
+    assert all(b["median_cost_s"] >= 0 for b in base.values())
     assert all(e >= 0 for e in data["strain_energy_error"])
     assert main(["evaluate", str(out), str(tiny_dataset), "--folds", "2", "--quiet"]) == 0
     assert "2-fold cross-validation by scenario" in capsys.readouterr().out

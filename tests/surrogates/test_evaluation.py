@@ -62,3 +62,16 @@ def test_cross_validation_holds_out_each_scenario_once(tiny_dataset: Path, tmp_p
         data = load_checkpoint(tmp_path / f"fold{i}.pt").data
         assert set(h).isdisjoint(data["train_scenarios"] + data["val_scenarios"])
     assert replace(cfg).epochs == 1
+
+
+def test_baseline_scores_persistence_beside_the_network(tiny_dataset: Path) -> None:
+    from diathermy.surrogates.baseline import baseline_report
+
+    torch.manual_seed(0)
+    model = DisplacementCNN(CNNConfig(width=4, depth=2))
+    report = baseline_report(model, tiny_dataset, scenarios=(1, 4))
+    s = report.scores
+    assert [len(s[n]) for n in ("cnn", "cnn+patch", "previous", "previous+patch")] == [8, 8, 6, 6]
+    for alone, patched in zip(s["previous"], s["previous+patch"], strict=True):
+        assert patched.residual <= alone.residual + 1e-12  # the patch never moves away
+    assert report.summary()["previous"]["samples"] == 6

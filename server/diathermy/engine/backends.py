@@ -11,13 +11,14 @@ from collections.abc import Callable
 from pathlib import Path
 
 from diathermy.engine.context import EngineContext
-from diathermy.errors import SceneError
+from diathermy.errors import DiathermyError, SceneError
 from diathermy.physics.incremental_mechanics import (
     DEFAULT_GUARD_TOLERANCE,
     IncrementalFEMBackend,
     IncrementalSettings,
 )
 from diathermy.physics.mechanics_backend import FEMBackend, MechanicsBackend
+from diathermy.physics.predictors import DisplacementPredictor
 
 ModelResolver = Callable[[str | None, tuple[int, int, int]], Path]
 """``(mechanics.model, grid) -> checkpoint``: a registry name (or None: the grid's default
@@ -48,6 +49,28 @@ def fem_of(backend: MechanicsBackend | None) -> FEMBackend | None:
     return backend if isinstance(backend, FEMBackend) else None
 
 
+def auto_network(
+    ctx: EngineContext, models: ModelResolver | None
+) -> tuple[DisplacementPredictor | None, str | None]:
+    """The network 'auto' may ask, or None and why not (a graded grid, no model for the grid,
+    a model that does not load): 'auto' then runs on persistence, never fails mid-run."""
+    grid = ctx.disc.grid
+    shape = "x".join(str(n) for n in grid.shape)
+    if not grid.is_uniform:
+        return None, f"no network for the graded grid {shape}: persistence"
+    model = ctx.scene.mechanics.model
+    try:
+        # torch loads only here: an engine without a network never imports it
+        from diathermy.surrogates.predictor import CNNPredictor
+
+        path = Path(model) if model is not None and Path(model).is_file() else None
+        if path is None:
+            path = (models or shipped_models)(model, grid.shape)
+        return CNNPredictor(ctx.disc.mesh, path), None
+    except (DiathermyError, OSError, ImportError, RuntimeError, ValueError) as err:
+        return None, f"no network for grid {shape} ({str(err).split(';')[0]}): persistence"
+
+
 def make_backend(
     ctx: EngineContext, *, models: ModelResolver | None, position: PositionFn
 ) -> MechanicsBackend:
@@ -61,15 +84,21 @@ def make_backend(
             rtol=cfg.rtol,
             ersatz_ratio=tissue.ersatz_stiffness_ratio,
         )
-        if not (ctx.scene.solver.incremental and cfg.predictor == "previous"):
+        if not ctx.scene.solver.incremental or cfg.predictor == "none":
             return fem
         settings = IncrementalSettings(
             guard_tolerance=cfg.guard_tolerance or DEFAULT_GUARD_TOLERANCE,
             full_every=cfg.full_every,
             patch_threshold=cfg.patch_threshold,
             patch_layers=cfg.patch_layers,
+            patch=cfg.correction == "patch",
         )
-        return IncrementalFEMBackend(fem, settings)
+        if cfg.predictor != "auto":
+            return IncrementalFEMBackend(fem, settings)
+        network, unavailable = auto_network(ctx, models)
+        return IncrementalFEMBackend(
+            fem, settings, predictor="auto", network=network, network_unavailable=unavailable
+        )
     if cfg.backend in ("cnn", "pgd") and not ctx.disc.grid.is_uniform:
         shape = "x".join(str(n) for n in ctx.disc.grid.shape)
         raise SceneError(

@@ -63,7 +63,9 @@ class Simulation:
         self._last_result: StepResult | None = None
         if mechanics_backend is not None:
             self.ctx.mechanics = mechanics_backend
-        elif scene.mechanics.backend != "fem" and self.ctx.has("mechanics"):
+        elif (
+            scene.mechanics.backend != "fem" or scene.mechanics.predictor == "auto"
+        ) and self.ctx.has("mechanics"):
             self.ctx.mechanics  # noqa: B018  a missing or wrong model fails here, not later
 
     def _build_mechanics(self, ctx: EngineContext) -> MechanicsBackend:

@@ -1,12 +1,14 @@
-"""Incremental FEM mechanics: the previous displacement as the prediction, checked and corrected.
+"""Incremental FEM mechanics: a predicted displacement, checked and corrected.
 
-Between two steps the pore pressure changes on a few hot nodes and a few tets are cut, so the
+The prediction is the previous displacement, or with ``mechanics.predictor`` 'auto' a
+network's where that has nothing or is far off (``predictors``). Between two steps the pore pressure changes on a few hot nodes and a few tets are cut, so the
 last displacement is nearly the new one. Each step it is Ritz-scaled (the multiple closest in
 the energy norm), corrected by the patch solve where its residual concentrates (the crater
 wall, ``patch_correction``), and accepted when the relative equilibrium residual
 ||f - K u|| / ||f|| of the *new* system (one sparse mat-vec) is at most ``guard_tolerance``;
 otherwise, and at least every ``full_every`` solves, CG solves the full system from it to the
-FEM tolerance. Each answer says which path it took and why (``extra["mode"]``, ``["why"]``).
+FEM tolerance. Each answer says which path it took and why (``extra["mode"]``, ``["why"]``)
+and which predictor started it (``["predictor"]``, ``["predictor_why"]``).
 """
 
 from __future__ import annotations
@@ -17,10 +19,16 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from diathermy.physics.equilibrium_guard import ritz_scale
 from diathermy.physics.mechanics import MechanicsSolver
 from diathermy.physics.mechanics_backend import FEMBackend, MechanicsOutput, Rescaled
 from diathermy.physics.patch_correction import node_graph, patch_correct, residual_patch
+from diathermy.physics.predictors import (
+    DEFAULT_SWITCH_RESIDUAL,
+    DisplacementPredictor,
+    PredictorName,
+    Start,
+    choose_start,
+)
 
 DEFAULT_GUARD_TOLERANCE = 1e-2
 """Relative residual the local path must reach: on the 9x9x17 test block with a cut, max
@@ -38,6 +46,8 @@ class IncrementalSettings:
     patch_layers: int = 2
     patch_max_nodes: int = 4000
     patch_rounds: int = 3
+    patch: bool = True  # mechanics.correction: 'patch', or 'none' (the Ritz-scaled start as is)
+    switch_residual: float = DEFAULT_SWITCH_RESIDUAL  # predictor 'auto': when to ask the network
 
     def __post_init__(self) -> None:
         if not self.guard_tolerance > 0 or self.full_every < 1 or self.patch_rounds < 1:
@@ -51,29 +61,28 @@ class LocalSolve:
     u: np.ndarray
     residual: float
     residual_before: float
-    patch_nodes: np.ndarray  # nodes where u is not ritz_scale x u_prev
+    patch_nodes: np.ndarray  # nodes where u is not ritz_scale x the start
     ritz_scale: float
+    predictor: str = "previous"
 
 
 def local_solve(
     solver: MechanicsSolver,
-    u_prev: np.ndarray,
-    pressure_pa: np.ndarray,
-    p0_pa: float,
+    start: Start,
+    f: np.ndarray,
     graph: sp.csr_matrix,
     settings: IncrementalSettings,
+    u_prev: np.ndarray | None = None,
 ) -> LocalSolve:
-    """Ritz-scaled ``u_prev`` (n_nodes, 3) m, patch-corrected on ``solver``'s system for the
-    nodal pressure (n_nodes,) Pa; residuals over the free DOFs."""
+    """``start`` (Ritz-scaled, ``predictors.ritz_start``) patch-corrected on ``solver``'s system
+    with load f (n_nodes, 3) N; residuals over the free DOFs. ``u_prev`` (n_nodes, 3) m: the
+    warm start, whose constrained values the start zeroed (they count as moved)."""
     free = ~solver.constrained.reshape(-1, 3)
-    f = solver.load(pressure_pa, p0_pa).reshape(-1, 3)
-    u = np.where(free, u_prev, 0.0)
-    Ku = (solver.K @ u.ravel()).reshape(-1, 3)
-    alpha = ritz_scale(f, Ku, u, free)
-    u, Ku = alpha * u, alpha * Ku
+    u, Ku = start.u, start.Ku
     moved = np.zeros(0, dtype=np.int64)
-    first = None
-    for _ in range(settings.patch_rounds):  # each round patches where the last one left off
+    first = after = start.residual
+    for _ in range(settings.patch_rounds if settings.patch else 0):
+        # each round patches where the last one left off
         nodes = residual_patch(
             np.where(free, f - Ku, 0.0),
             graph,
@@ -82,27 +91,42 @@ def local_solve(
             max_nodes=settings.patch_max_nodes,
         )
         patched = patch_correct(solver.K, f, u, Ku, free, nodes)
-        first = patched.residual_before if first is None else first
-        u, Ku = patched.u, patched.Ku
+        u, Ku, after = patched.u, patched.Ku, patched.residual_after
         if patched.nodes:
             moved = np.union1d(moved, nodes)
-        if patched.residual_after <= settings.guard_tolerance or not patched.nodes:
+        if after <= settings.guard_tolerance or not patched.nodes:
             break
-    held = np.flatnonzero(np.any(~free & (u_prev != 0), axis=1))  # zeroed constrained values
-    moved = np.union1d(moved, held)
-    assert first is not None
-    return LocalSolve(u, patched.residual_after, first, moved, alpha)
+    if u_prev is not None:
+        held = np.flatnonzero(np.any(~free & (u_prev != 0), axis=1))  # zeroed constrained values
+        moved = np.union1d(moved, held)
+    return LocalSolve(u, after, first, moved, start.ritz_scale, start.name)
 
 
 class IncrementalFEMBackend:
-    """The FEM backend with the previous displacement as predictor (``mechanics.predictor``
-    "previous"); the full solve is ``fem``'s, with its kept operator and AMG hierarchy."""
+    """The FEM backend started from a predictor (``mechanics.predictor`` 'previous': the last
+    displacement; 'auto': a network where persistence has nothing or is far off, see
+    ``predictors``); the full solve is ``fem``'s, with its kept operator and AMG hierarchy.
+
+    ``network``: the model 'auto' may ask (None: none for this grid, ``network_unavailable``
+    says why; 'auto' then falls back to persistence or a full solve and reports that reason).
+    """
 
     name = "fem"
 
-    def __init__(self, fem: FEMBackend, settings: IncrementalSettings) -> None:
+    def __init__(
+        self,
+        fem: FEMBackend,
+        settings: IncrementalSettings,
+        *,
+        predictor: PredictorName = "previous",
+        network: DisplacementPredictor | None = None,
+        network_unavailable: str | None = None,
+    ) -> None:
         self.fem = fem
         self.settings = settings
+        self.predictor: PredictorName = predictor
+        self.network = network
+        self.network_unavailable = network_unavailable
         self._graph: sp.csr_matrix | None = None
         self.since_full = 0
         self.n_local = 0
@@ -119,10 +143,42 @@ class IncrementalFEMBackend:
         if self._forced is not None:
             return f"forced: {self._forced}"
         if warm_start is None or not np.any(warm_start):
-            return "no previous displacement to start from"
+            if self.predictor != "auto":
+                return "no previous displacement to start from"
+            if self.network is None:
+                return (
+                    "no previous displacement to start from; "
+                    f"{self.network_unavailable or 'no network'}"
+                )
         if self.since_full + 1 >= self.settings.full_every:
             return f"interval: a full solve every {self.settings.full_every} solves"
         return None
+
+    def _start(
+        self,
+        solver: MechanicsSolver,
+        f: np.ndarray,
+        pressure_pa: np.ndarray,
+        level_set_m: np.ndarray,
+        warm_start: np.ndarray | None,
+    ) -> tuple[Start | None, str, dict[str, float]]:
+        """The predictor's start for this step, why, and the residuals of the starts looked at."""
+        net = self.network
+        free = ~solver.constrained.reshape(-1, 3)
+        choice = choose_start(
+            self.predictor,
+            u_prev=warm_start,
+            network=None
+            if net is None
+            else (lambda: net.predict(pressure_pa, level_set_m, warm_start)),
+            network_name=net.name if net is not None else "network",
+            matvec=lambda u: (solver.K @ u.ravel()).reshape(-1, 3),
+            f=f,
+            free=free,
+            switch_residual=self.settings.switch_residual,
+            unavailable=self.network_unavailable,
+        )
+        return choice.start, choice.why, choice.considered
 
     def solve(
         self,
@@ -137,19 +193,29 @@ class IncrementalFEMBackend:
         solver, rebuilt = self.fem.operator_for(youngs_modulus_pa, healthy)
         operator_s = time.perf_counter() - t0
         why = self.full_reason(warm_start)
-        extra: dict[str, float | int | bool | str] = {"operator_s": operator_s}
+        extra: dict[str, float | int | bool | str] = {"operator_s": operator_s, "predictor": "none"}
         x0 = warm_start
         if why is None:
-            assert warm_start is not None
+            f = solver.load(pressure_pa, self.fem.p0_pa).reshape(-1, 3)
+            start, picked, considered = self._start(solver, f, pressure_pa, level_set_m, warm_start)
+            extra.update(predictor_why=picked)
+            extra.update({f"residual_{k}": v for k, v in considered.items()})
+            if start is None:
+                why = picked
+        if why is None:
+            assert start is not None
             if self._graph is None:
                 self._graph = node_graph(solver.K)  # the mesh's pattern: built once
+            persistence = start.name == "previous"
             local = local_solve(
-                solver, warm_start, pressure_pa, self.fem.p0_pa, self._graph, self.settings
+                solver, start, f, self._graph, self.settings, warm_start if persistence else None
             )
             extra.update(
+                predictor=start.name,
                 residual_before=local.residual_before,
                 patch_nodes=int(local.patch_nodes.size),
                 ritz_scale=local.ritz_scale,
+                predict_s=start.predict_s,
                 local_s=time.perf_counter() - t0 - operator_s,
             )
             tol = self.settings.guard_tolerance
@@ -169,7 +235,7 @@ class IncrementalFEMBackend:
                     rebuilt=rebuilt,
                     loose_tets=loose if loose.any() else None,
                     rescaled=None
-                    if previous_E is None
+                    if previous_E is None or not persistence
                     else Rescaled(local.ritz_scale, local.patch_nodes, previous_E),
                     extra=extra,
                 )
@@ -186,6 +252,8 @@ class IncrementalFEMBackend:
         self.n_full += 1
         self._forced = None
         self.last_E_pa = self.fem.solver.youngs_modulus_pa if self.fem.solver else None
+        if extra["predictor"] == "none" and x0 is not None and np.any(x0):
+            extra["predictor"] = "previous"  # CG started from the last displacement
         return MechanicsOutput(
             u=out.u,
             iterations=out.iterations,

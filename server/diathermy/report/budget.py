@@ -81,5 +81,7 @@ def resolve_accuracy_budget(scene: Scene, report_path: str | Path | None = None)
     if row["backend"] == "fem":  # rows measured before issue #25 solved in full
         data["mechanics"]["full_every"] = row.get("full_every", 10)
         data["solver"]["incremental"] = bool(row.get("incremental", False))
+        if row["variant"] != "previous":  # persistence patched but alone: rows before #22 said
+            data["mechanics"]["correction"] = "patch"  # "none" for fem and patched all the same
     data["accuracy_budget"] = None  # resolved: the chosen variant is now explicit
     return scene_from_dict(data)

@@ -25,7 +25,7 @@ class Variant:
     model: str | None = None
     guard_tolerance: float | None = None
     coupling: Literal["staggered", "monolithic"] = "staggered"
-    correction: Literal["none", "patch"] = "none"  # cnn only: the network's u, or patched
+    correction: Literal["none", "patch"] = "none"  # cnn and fem-incremental: u as is, or patched
     incremental: bool = False  # fem: the previous-displacement predictor (issue #25)
     full_every: int = 10  # ... with a full solve at least every this many solves
 
@@ -73,9 +73,17 @@ def _grid_name(grid: tuple[int, int, int] | None) -> str:
     return "scene-grid" if grid is None else "x".join(str(n) for n in grid)
 
 
+NO_GUARD = 1e30
+"""The guard tolerance of persistence without a guard: every prediction accepted, as the CNN's."""
+NO_INTERVAL = 10000
+"""...and without a full-solve interval (the scene's largest)."""
+
+
 def default_variants(models: dict[str, str] | None = None) -> list[Variant]:
     """FEM at four tolerances, monolithic coupling, a coarser grid and incremental stepping (a full
-    solve every 10 and every 50 steps), plus the surrogates given.
+    solve every 10 and every 50 steps), the baseline persistence ('previous': the last
+    displacement Ritz-scaled; alone and with the patch, no guard, no interval: as the
+    network's variants), plus the surrogates given.
 
     ``models`` maps variant names to model files, e.g. {"cnn-w16": "model.pt", "pgd-15": "pgd.npz"};
     a name starting with "cnn" runs the CNN backend: the network alone, with the patch
@@ -89,9 +97,20 @@ def default_variants(models: dict[str, str] | None = None) -> list[Variant]:
         Variant("fem-rtol1e-8", rtol=1e-8),
         Variant("fem-rtol1e-6-monolithic", rtol=1e-6, coupling="monolithic"),
         Variant("fem-coarse-rtol1e-6", rtol=1e-6, grid=(17, 17, 33)),
-        Variant("fem-incremental", rtol=1e-6, incremental=True),
-        Variant("fem-incremental-full50", rtol=1e-6, incremental=True, full_every=50),
-    ]
+        Variant("fem-incremental", rtol=1e-6, incremental=True, correction="patch"),
+        Variant(
+            "fem-incremental-full50", rtol=1e-6, incremental=True, full_every=50,
+            correction="patch",
+        ),
+        Variant(
+            "previous", incremental=True, correction="none", guard_tolerance=NO_GUARD,
+            full_every=NO_INTERVAL,
+        ),
+        Variant(
+            "previous+patch", incremental=True, correction="patch", guard_tolerance=NO_GUARD,
+            full_every=NO_INTERVAL,
+        ),
+    ]  # fmt: skip
     for name, path in (models or {}).items():
         if name.startswith("cnn"):
             out.append(Variant(name, backend="cnn", model=path))

@@ -131,12 +131,16 @@ class MechanicsConfig(_Model):
     backend: Literal["fem", "cnn", "pgd"] = "fem"
     rtol: Annotated[float, Field(gt=0, lt=1)] = 1e-6
     model: str | None = Field(None, description="surrogate model path or registry name")
-    predictor: Literal["previous", "none"] = Field(
+    predictor: Literal["previous", "none", "auto"] = Field(
         "previous",
         description="fem, incremental: 'previous' starts from the last displacement, Ritz-scaled "
         "and patch-corrected, accepted when its relative residual is at most guard_tolerance "
-        "(default 1e-2), else solved in full; 'none' solves in full every step. The CNN "
-        "predictor is backend 'cnn'",
+        "(default 1e-2), else solved in full; 'auto' starts from the network (mechanics.model, "
+        "else the grid's shipped CNN) where persistence has nothing (first mechanics step) or "
+        "its residual exceeds 0.5 (a jump), persistence otherwise, and falls back to "
+        "persistence with the reason in the step report when the grid has no model; 'none' "
+        "solves in full every step. The step report names the predictor (extra.predictor, "
+        "extra.predictor_why)",
     )
     full_every: Annotated[int, Field(ge=1, le=10000)] = Field(
         10, description="fem predictor 'previous': a full solve at least every this many solves"
@@ -149,9 +153,9 @@ class MechanicsConfig(_Model):
     )
     correction: Literal["none", "patch"] = Field(
         "patch",
-        description="cnn: 'patch' solves equilibrium exactly on the nodes where the prediction's "
-        "residual concentrates (the crater wall), the prediction held fixed around them; 'none' "
-        "keeps the network's displacement. fem and pgd ignore it",
+        description="cnn and fem-previous/auto: 'patch' solves equilibrium exactly on the nodes "
+        "where the prediction's residual concentrates (the crater wall), the prediction held "
+        "fixed around them; 'none' keeps the Ritz-scaled prediction. pgd ignores it",
     )
     patch_threshold: Annotated[float, Field(gt=0, le=1)] = Field(
         0.1,

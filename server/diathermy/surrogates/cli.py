@@ -123,6 +123,19 @@ def _print_summary(title: str, summary: dict[str, float]) -> None:
     )
 
 
+def _print_baseline(baseline: dict[str, dict[str, float]]) -> None:
+    """The network beside persistence, alone and patched (issue #22)."""
+    print(
+        "beside persistence (the previous sample of the scenario), Ritz-scaled, alone and "
+        "with the patch; strain-energy error against the sample:"
+    )
+    for name, s in baseline.items():
+        print(
+            f"  {name:<15} {int(s['samples']):>5} samples  mean {s['mean_strain_energy_error']:.4g}"
+            f"  max {s['max_strain_energy_error']:.4g}  cost {s['median_cost_s']:.4g} s (median)"
+        )
+
+
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from dataclasses import fields
 
@@ -148,6 +161,12 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
             "summary": report.summary(),
             "strain_energy_error": report.strain_energy_error.tolist(),
         }
+        if not args.no_baseline:
+            from diathermy.surrogates.baseline import baseline_report
+
+            baseline = baseline_report(ckpt.model, info.path, scenarios=scenarios).summary()
+            _print_baseline(baseline)
+            result["baseline"] = baseline
     else:
         known = {f.name for f in fields(TrainConfig)}
         stored = {k: v for k, v in ckpt.training_config.items() if k in known}
@@ -246,6 +265,11 @@ def add_evaluate_parser(subparsers: Any) -> None:
         help="evaluate on all complete scenarios, or the model's own validation scenarios",
     )  # fmt: skip
     s.add_argument("--batch-size", type=_positive_int, default=4)
+    s.add_argument(
+        "--no-baseline", action="store_true",
+        help="skip the persistence baseline (the previous sample, alone and patched, beside "
+        "the network alone and patched: one FEM operator per sample)",
+    )  # fmt: skip
     s.add_argument("--json", help="also write the numbers to this JSON file")
     s.add_argument("--quiet", action="store_true", help="no progress bars")
     s.set_defaults(func=_cmd_evaluate)

@@ -39,18 +39,20 @@ def skip(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome | No
 
 
 def mode_of(backend: str, extra: dict[str, Any]) -> dict[str, str]:
-    """Local or full, and why, for a backend that does not say so itself."""
+    """Local or full, why, and which predictor, for a backend that does not say so itself."""
     if backend == "fem":
         return {"mode": "full", "why": "full solve every step (mechanics.predictor 'none' or "
-                "solver.incremental false)"}  # fmt: skip
+                "solver.incremental false)", "predictor": "none"}  # fmt: skip
     if extra.get("corrected"):
         return {
             "mode": "full",
             "why": "the surrogate's residual exceeded the guard: CG on the block",
+            "predictor": backend,
         }
     return {
         "mode": "local",
         "why": f"{backend} prediction, patch of {extra.get('patch_nodes', 0)} nodes",
+        "predictor": backend,
     }
 
 
