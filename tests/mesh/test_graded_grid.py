@@ -161,3 +161,9 @@ def test_graded_grid_bad_inputs_raise_mesh_error(values):
     except MeshError:
         return
     assert g.n_nodes >= 8 and all(np.all(np.diff(a) > 0) for a in g.axes())
+
+
+def test_subnormal_fine_spacing_is_a_mesh_error():
+    """(hi - lo) / fine overflows to inf: a clear MeshError, not an OverflowError."""
+    with pytest.raises(MeshError, match="nodes"):
+        Grid.graded((0.0, 0.0, 0.0), (0.2, 0.1, 0.1), 5e-324)

@@ -96,7 +96,8 @@ def graded_axis(
         a = lo
     if hi - b < fine:
         b = hi
-    n_region = max(1, math.ceil((b - a) / fine * (1.0 - 1e-12)))
+    ratio = (b - a) / fine * (1.0 - 1e-12)  # inf for a subnormal fine spacing
+    n_region = max(1, math.ceil(ratio)) if math.isfinite(ratio) else MAX_AXIS_NODES
     if n_region + 1 > MAX_AXIS_NODES:
         raise MeshError(
             f"a fine spacing of {fine} m over {b - a} m needs {n_region + 1} nodes on one axis "
