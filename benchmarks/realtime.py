@@ -354,6 +354,7 @@ def main() -> None:
         r.add_argument("--steps", type=int, default=steps)
         r.add_argument("--warmup", type=int, default=60, help="steps at most before the cut")
         r.add_argument("--top", type=int, default=15, help="profile: functions listed")
+        r.add_argument("--out", type=Path, default=RESULTS, help="run: results folder")
     s = sub.add_parser("solvers", help="per-saving cost of a cutting step")
     s.add_argument("--grids", nargs="+", type=float, default=[0.0, 0.5], help="0: uniform")
     s.add_argument("--steps", type=int, default=6)
@@ -366,7 +367,7 @@ def main() -> None:
             for n in a.scenes
             for g in a.grids
         }
-        write_run(runs, a, started)
+        write_run(runs, a, started, a.out)
         return
     if a.cmd == "profile":
         profile(a, started)

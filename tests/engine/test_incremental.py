@@ -140,3 +140,28 @@ def test_rescaled_strain_energy_is_the_recomputed_one():
         assert np.abs(got - W).max() <= 1e-12 * W.max(), r.step
         locals_seen += 1
     assert locals_seen >= 3
+
+
+def test_graded_grid_solves_in_full_unless_a_guard_is_set():
+    """On a graded grid the default guard does not bound the error (realtime.md): every
+    mechanics step is full and says why; an explicit guard_tolerance turns the local path on."""
+    from diathermy.engine.backends import GRADED_FULL
+    from diathermy.scene import MechanicsConfig, Resolution
+
+    graded = {"resolution": Resolution(fine_m=1.5e-3, margin_m=1e-3, depth_m=3e-3)}
+    default = Simulation(tiny_scene(**graded))
+    assert not default.grid.is_uniform
+    chosen = Simulation(tiny_scene(**graded, mechanics=MechanicsConfig(guard_tolerance=1e-2)))
+    modes = {"default": set(), "chosen": set()}
+    for _ in range(STEPS):
+        for key, sim in (("default", default), ("chosen", chosen)):
+            mech = sim.step().effects["mechanics"]
+            if mech.ran:
+                modes[key].add(mech.extra["mode"])
+                if key == "default":
+                    assert mech.extra["why"] in (
+                        GRADED_FULL,
+                        "no previous displacement to start from",
+                    )
+    assert modes["default"] == {"full"}
+    assert "local" in modes["chosen"]
