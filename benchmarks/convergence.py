@@ -523,8 +523,9 @@ def report() -> None:
             cut_ratio = g.get("cutting_median_s", math.nan) / u.get("cutting_median_s", math.nan)
             lines.append(
                 f"\nGraded / uniform: median step {g['step_median_s'] / u['step_median_s']:.2f}x "
-                f"(the uniform grid's median step is one before its first cut, which comes at "
-                f"{u['first_cut_s']:.2f} s against {g['first_cut_s']:.2f} s), median cutting step "
+                f"(first cut at {u['first_cut_s']:.2f} s on the uniform grid against "
+                f"{g['first_cut_s']:.2f} s: the runs cut for different shares of their steps), "
+                "median cutting step "
                 f"{cut_ratio:.2f}x, total {g['total_s'] / u['total_s']:.2f}x, max RSS "
                 f"{g['max_rss_mib'] / u['max_rss_mib']:.2f}x."
             )
