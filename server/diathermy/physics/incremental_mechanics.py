@@ -1,14 +1,17 @@
 """Incremental FEM mechanics: a predicted displacement, checked and corrected.
 
 The prediction is the previous displacement, or with ``mechanics.predictor`` 'auto' a
-network's where that has nothing or is far off (``predictors``). Between two steps the pore pressure changes on a few hot nodes and a few tets are cut, so the
-last displacement is nearly the new one. Each step it is Ritz-scaled (the multiple closest in
+network's where that has nothing or is far off (``predictors``). Between two steps the pore
+pressure changes on a few hot nodes and a few tets are cut, so the last displacement is nearly
+the new one. Each step it is Ritz-scaled (the multiple closest in
 the energy norm), corrected by the patch solve where its residual concentrates (the crater
 wall, ``patch_correction``), and accepted when the relative equilibrium residual
 ||f - K u|| / ||f|| of the *new* system (one sparse mat-vec) is at most ``guard_tolerance``;
 otherwise, and at least every ``full_every`` solves, CG solves the full system from it to the
 FEM tolerance. Each answer says which path it took and why (``extra["mode"]``, ``["why"]``)
-and which predictor started it (``["predictor"]``, ``["predictor_why"]``).
+and which predictor started it (``["predictor"]``, ``["predictor_why"]``). The residual
+guard does not bound the error on the fine graded grids (docs/realtime.md): there the engine
+sets ``always_full`` unless the scene chooses a guard.
 """
 
 from __future__ import annotations
