@@ -68,8 +68,11 @@ def assert_sane(sim: Simulation, rep: StepReport) -> None:
         assert el.extra["residual"] <= sim.scene.solver.electric_rtol * 1.01, rep.step
     mech = rep.effects.get("mechanics")
     if mech is not None and mech.ran:  # the incremental path: its guard; a full solve: rtol
-        tol = mech.extra["guard_tolerance"] if mech.extra["mode"] == "local" else None
-        assert mech.extra["residual"] <= (tol or sim.scene.mechanics.rtol * 1.01), rep.step
+        if "energy_estimate" in mech.extra and mech.extra["mode"] == "local":  # polished
+            assert mech.extra["energy_estimate"] <= mech.extra["energy_tolerance"], rep.step
+        else:
+            tol = mech.extra["guard_tolerance"] if mech.extra["mode"] == "local" else None
+            assert mech.extra["residual"] <= (tol or sim.scene.mechanics.rtol * 1.01), rep.step
 
 
 def run_sane(sim: Simulation, n: int) -> list[StepReport]:

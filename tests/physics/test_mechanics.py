@@ -220,10 +220,12 @@ def test_errors():
         solver.solve(P0 + np.linspace(0, 1e5, mesh.n_nodes))
 
 
+@pytest.mark.parametrize("consume", [False, True])
 @pytest.mark.parametrize("graded", [False, True])
-def test_updated_stiffness_equals_a_fresh_build_bit_for_bit(graded):
+def test_updated_stiffness_equals_a_fresh_build_bit_for_bit(graded, consume):
     """A cut of a few tets updates the previous operator in place of assembling it again, and
-    the matrix, its scaling and the solution are exactly those of a fresh build."""
+    the matrix, its scaling and the solution are exactly those of a fresh build; a consumed
+    base (its matrices taken over, not copied) refuses to solve or be updated again."""
     if graded:
         grid, radii = Grid.graded((0.08, 0.03, 0.06), (0.12, 0.07, 0.1), 0.005), (6e-3, 1e-2, 0.014)
     else:
@@ -235,13 +237,21 @@ def test_updated_stiffness_equals_a_fresh_build_bit_for_bit(graded):
     for radius in radii:  # a growing crater: a chain of updates
         healthy = np.linalg.norm(c - [0.1, 0.05, 0.1], axis=1) > radius
         Ee = np.where(healthy, E, 1e-6 * E)
+        previous = solver
         solver = MechanicsSolver(
-            mesh, Ee, NU, healthy=healthy, assembler=base.assembler, base=solver
-        )
+            mesh, Ee, NU, healthy=healthy, assembler=base.assembler, base=solver,
+            consume_base=consume,
+        )  # fmt: skip
+        assert previous.consumed == consume
+        if consume:
+            with pytest.raises(RuntimeError, match="handed"):
+                previous.solve(np.full(mesh.n_nodes, P0))
+            assert not previous.updatable_to(solver)
         fresh = MechanicsSolver(mesh, Ee, NU, healthy=healthy, assembler=base.assembler)
         assert solver.updated and not fresh.updated
         assert np.array_equal(solver.K.data, fresh.K.data)
         assert np.array_equal(solver.scale, fresh.scale)
+        assert np.array_equal(solver.K_scaled.data, fresh.K_scaled.data)  # scaled in place too
         p = P0 + DP * healthy.any() * np.ones(mesh.n_nodes)
         assert np.array_equal(solver.solve(p).u, fresh.solve(p).u)
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
+from typing import Literal
 
 from diathermy.engine.context import EngineContext
 from diathermy.errors import DiathermyError, SceneError
@@ -71,11 +72,15 @@ def auto_network(
         return None, f"no network for grid {shape} ({str(err).split(';')[0]}): persistence"
 
 
-GRADED_FULL = (
-    "graded grid: the default 1e-2 residual guard let local steps through at up to 57 % "
-    "strain-energy error on the moving electrode's 1 mm grid (benchmarks/results/realtime.md); "
-    "solved in full unless mechanics.guard_tolerance is set"
-)
+def guard_of(ctx: EngineContext) -> Literal["residual", "energy"]:
+    """The local path's acceptance test: the scene's ``mechanics.guard``, where 'auto' is the
+    energy estimate on graded grids unless a residual tolerance is set (the residual guard let
+    57 % strain-energy errors through on the moving electrode's 1 mm grid, realtime.md)."""
+    cfg = ctx.scene.mechanics
+    if cfg.guard != "auto":
+        return cfg.guard
+    graded = not ctx.disc.grid.is_uniform
+    return "energy" if graded and cfg.guard_tolerance is None else "residual"
 
 
 def make_backend(
@@ -99,9 +104,9 @@ def make_backend(
             patch_threshold=cfg.patch_threshold,
             patch_layers=cfg.patch_layers,
             patch=cfg.correction == "patch",
-            always_full=None
-            if ctx.disc.grid.is_uniform or cfg.guard_tolerance is not None
-            else GRADED_FULL,
+            guard=guard_of(ctx),
+            energy_tolerance=cfg.energy_tolerance,
+            polish_iterations=cfg.polish_iterations,
         )
         if cfg.predictor != "auto":
             return IncrementalFEMBackend(fem, settings)

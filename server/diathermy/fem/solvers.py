@@ -128,6 +128,12 @@ class KrylovSolver:
         return self._stale
 
     @property
+    def kept_preconditioner(self) -> spla.LinearOperator | None:
+        """The preconditioner the next solve would use without building one (None: it builds,
+        because there is none yet or the kept hierarchy stopped paying)."""
+        return None if self.reuse.rebuild_due else self._M
+
+    @property
     def warm_start(self) -> np.ndarray | None:
         """The last solution, the next solve's initial guess (None: start from zero)."""
         return self._last_x

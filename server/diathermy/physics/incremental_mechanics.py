@@ -3,25 +3,34 @@
 The prediction is the previous displacement, or with ``mechanics.predictor`` 'auto' a
 network's where that has nothing or is far off (``predictors``). Between two steps the pore
 pressure changes on a few hot nodes and a few tets are cut, so the last displacement is nearly
-the new one. Each step it is Ritz-scaled (the multiple closest in
-the energy norm), corrected by the patch solve where its residual concentrates (the crater
-wall, ``patch_correction``), and accepted when the relative equilibrium residual
-||f - K u|| / ||f|| of the *new* system (one sparse mat-vec) is at most ``guard_tolerance``;
-otherwise, and at least every ``full_every`` solves, CG solves the full system from it to the
-FEM tolerance. Each answer says which path it took and why (``extra["mode"]``, ``["why"]``)
-and which predictor started it (``["predictor"]``, ``["predictor_why"]``). The residual
-guard does not bound the error on the fine graded grids (docs/realtime.md): there the engine
-sets ``always_full`` unless the scene chooses a guard.
+the new one. Each step it is Ritz-scaled (the multiple closest in the energy norm) and
+corrected by the patch solve where its residual concentrates (the crater wall,
+``patch_correction``). The guard then decides:
+
+- ``residual``: accepted when the relative equilibrium residual ||f - K u|| / ||f|| of the
+  *new* system (one sparse mat-vec) is at most ``guard_tolerance``;
+- otherwise, and always with the ``energy`` guard, it is *polished*: PCG with the kept AMG
+  hierarchy (``fem.energy_cg``, at most ``polish_iterations``) until the estimated relative
+  energy-norm error sqrt(r.Mr) / ||u||_K is at most ``energy_tolerance``.
+
+What passes neither, and at least every ``full_every`` solves, CG solves in full from it to the
+FEM tolerance. On fine graded grids a small residual does not bound the error (the residual
+guard let 57 % strain-energy errors through, docs/realtime.md), so 'auto' picks the energy
+guard there. Each answer says which path it took and why (``extra["mode"]``: 'local' for an
+accepted prediction, 'full'; ``["why"]``) and which predictor started it (``["predictor"]``,
+``["predictor_why"]``).
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 import scipy.sparse as sp
 
+from diathermy.fem.energy_cg import EnergyCG, energy_cg
 from diathermy.physics.mechanics import MechanicsSolver
 from diathermy.physics.mechanics_backend import FEMBackend, MechanicsOutput, Rescaled
 from diathermy.physics.patch_correction import node_graph, patch_correct, residual_patch
@@ -37,6 +46,11 @@ DEFAULT_GUARD_TOLERANCE = 1e-2
 """Relative residual the local path must reach: on the 9x9x17 test block with a cut, max
 strain-energy error 0.33 % and max temperature error 0.005 K against full solves (1e-3: mostly
 full solves; 3e-2: 0.83 %); the default grids: benchmarks/results/realtime.md."""
+DEFAULT_ENERGY_TOLERANCE = 1e-3
+"""Relative energy-norm error estimate (``fem.energy_cg``) a polished answer must reach."""
+DEFAULT_POLISH_ITERATIONS = 10
+"""PCG iterations with the kept hierarchy before the step falls back to the full solve."""
+Guard = Literal["residual", "energy"]
 
 
 @dataclass(frozen=True)
@@ -49,13 +63,19 @@ class IncrementalSettings:
     patch_layers: int = 2
     patch_max_nodes: int = 4000
     patch_rounds: int = 1  # 3 passed the guard at 23 % SE error on 0.4 mm: docs/realtime.md
-    always_full: str | None = None  # why every solve is full (the local path is off)
     patch: bool = True  # mechanics.correction: 'patch', or 'none' (the Ritz-scaled start as is)
     switch_residual: float = DEFAULT_SWITCH_RESIDUAL  # predictor 'auto': when to ask the network
+    guard: Guard = "residual"  # 'energy': only the polish's energy estimate accepts a step
+    energy_tolerance: float = DEFAULT_ENERGY_TOLERANCE
+    polish_iterations: int = DEFAULT_POLISH_ITERATIONS  # 0: no polish, the full solve
 
     def __post_init__(self) -> None:
         if not self.guard_tolerance > 0 or self.full_every < 1 or self.patch_rounds < 1:
             raise ValueError("guard_tolerance must be > 0, full_every and patch_rounds >= 1")
+        if not 0 < self.energy_tolerance < 1 or self.polish_iterations < 0:
+            raise ValueError("energy_tolerance must lie in (0, 1), polish_iterations be >= 0")
+        if self.guard not in ("residual", "energy"):
+            raise ValueError(f"guard must be 'residual' or 'energy', got {self.guard!r}")
 
 
 @dataclass(frozen=True)
@@ -146,8 +166,6 @@ class IncrementalFEMBackend:
         """Why this step must solve in full (None: the local path may serve)."""
         if self._forced is not None:
             return f"forced: {self._forced}"
-        if self.settings.always_full is not None:
-            return self.settings.always_full
         if warm_start is None or not np.any(warm_start):
             if self.predictor != "auto":
                 return "no previous displacement to start from"
@@ -185,6 +203,52 @@ class IncrementalFEMBackend:
             unavailable=self.network_unavailable,
         )
         return choice.start, choice.why, choice.considered
+
+    def _polish(self, solver: MechanicsSolver, f: np.ndarray, u: np.ndarray) -> EnergyCG | None:
+        """PCG from u (n_nodes, 3) m with the kept hierarchy until the energy-error estimate
+        passes, on the Jacobi-scaled system; None when there is no hierarchy to keep (the full
+        solve builds one) or polishing is off."""
+        M = solver.krylov.kept_preconditioner
+        A = solver.krylov.A
+        if M is None or A is None or self.settings.polish_iterations == 0:
+            return None
+        s = solver.scale
+        return energy_cg(
+            A,
+            f.ravel() * s,
+            u.ravel() / s,
+            M,
+            tol=self.settings.energy_tolerance,
+            maxiter=self.settings.polish_iterations,
+        )
+
+    def _accept(
+        self,
+        solver: MechanicsSolver,
+        u: np.ndarray,
+        residual: float,
+        rebuilt: bool,
+        local: LocalSolve,
+        rescaled: bool,
+        extra: dict[str, float | int | bool | str],
+    ) -> MechanicsOutput:
+        """The predictor's answer u (n_nodes, 3) m taken as this step's; ``rescaled``: u is the
+        Ritz-scaled warm start but on the patch (its strain energy is updated, not recomputed)."""
+        self.since_full += 1
+        self.n_local += 1
+        loose = solver.fragments.loose
+        previous_E, self.last_E_pa = self.last_E_pa, solver.youngs_modulus_pa
+        extra.update(mode="local")
+        return MechanicsOutput(
+            u=u,
+            residual=residual,
+            rebuilt=rebuilt,
+            loose_tets=loose if loose.any() else None,
+            rescaled=None
+            if previous_E is None or not rescaled
+            else Rescaled(local.ritz_scale, local.patch_nodes, previous_E),
+            extra=extra,
+        )
 
     def solve(
         self,
@@ -225,28 +289,40 @@ class IncrementalFEMBackend:
                 local_s=time.perf_counter() - t0 - operator_s,
             )
             tol = self.settings.guard_tolerance
-            if local.residual <= tol:
-                self.since_full += 1
-                self.n_local += 1
-                loose = solver.fragments.loose
-                previous_E, self.last_E_pa = self.last_E_pa, solver.youngs_modulus_pa
+            if self.settings.guard == "residual" and local.residual <= tol:
+                extra.update(why=f"residual {local.residual:.1e} <= {tol:.0e}", guard_tolerance=tol)
+                rescaled = persistence
+                return self._accept(
+                    solver, local.u, local.residual, rebuilt, local, rescaled, extra
+                )
+            why = (
+                f"residual {local.residual:.1e} > {tol:.0e} after the patch"
+                if self.settings.guard == "residual"
+                else "energy guard"
+            )
+            polished = self._polish(solver, f, local.u)
+            if polished is not None:
+                etol = self.settings.energy_tolerance
                 extra.update(
-                    mode="local",
-                    why=f"residual {local.residual:.1e} <= {tol:.0e}",
-                    guard_tolerance=tol,
+                    polish_iterations=polished.iterations,
+                    energy_estimate=polished.estimate,
+                    energy_tolerance=etol,
+                    local_s=time.perf_counter() - t0 - operator_s,
                 )
-                return MechanicsOutput(
-                    u=local.u,
-                    residual=local.residual,
-                    rebuilt=rebuilt,
-                    loose_tets=loose if loose.any() else None,
-                    rescaled=None
-                    if previous_E is None or not persistence
-                    else Rescaled(local.ritz_scale, local.patch_nodes, previous_E),
-                    extra=extra,
+                if polished.estimate <= etol:
+                    extra.update(
+                        why=f"{why}; {polished.iterations} CG iterations with the kept "
+                        f"hierarchy: energy-error estimate {polished.estimate:.1e} <= {etol:.0e}",
+                    )
+                    u = (polished.x * solver.scale).reshape(-1, 3)
+                    return self._accept(solver, u, polished.residual, rebuilt, local, False, extra)
+                why = (
+                    f"{why}; energy-error estimate {polished.estimate:.1e} > {etol:.0e} after "
+                    f"{polished.iterations} CG iterations"
                 )
-            why = f"residual {local.residual:.1e} > {tol:.0e} after the patch"
-            x0 = local.u
+                x0 = (polished.x * solver.scale).reshape(-1, 3)
+            else:
+                x0 = local.u
         out = self.fem.solve(
             pressure_pa=pressure_pa,
             level_set_m=level_set_m,

@@ -155,6 +155,7 @@ class FEMBackend:
             and np.array_equal(self._E, youngs_modulus_pa)
         ):
             return self._solver, False
+        base, self._solver = self._solver, None  # a failed build must not leave it consumed
         self._solver = MechanicsSolver(
             self.mesh,
             youngs_modulus_pa,
@@ -164,7 +165,8 @@ class FEMBackend:
             rtol=self.rtol,
             assembler=self.assembler,
             krylov=self._krylov,
-            base=self._solver,
+            base=base,
+            consume_base=True,
         )
         self._E = youngs_modulus_pa.copy()
         self.n_builds += 1

@@ -151,6 +151,27 @@ class MechanicsConfig(_Model):
         "by CG; fem with predictor 'previous': above which it is solved in full; pgd: "
         "estimated strain-energy error above which a mode is enriched online",
     )
+    guard: Literal["auto", "residual", "energy"] = Field(
+        "auto",
+        description="fem, incremental: what accepts the predictor's answer without a full "
+        "solve. 'residual': its relative residual after the patch is at most guard_tolerance; "
+        "'energy': only PCG with the kept AMG hierarchy from it (at most polish_iterations) "
+        "until the estimated relative energy-norm error is at most energy_tolerance. With "
+        "'residual' a step that fails the residual check is polished the same way before it "
+        "falls back to the full solve. 'auto': 'energy' on graded grids (where a small residual "
+        "let 57 % strain-energy errors through) unless guard_tolerance is set, 'residual' on "
+        "uniform grids",
+    )
+    energy_tolerance: Annotated[float, Field(gt=0, lt=1)] = Field(
+        1e-3,
+        description="fem, incremental: relative energy-norm error estimate sqrt(r.Mr)/||u||_K "
+        "a polished answer must reach",
+    )
+    polish_iterations: Annotated[int, Field(ge=0, le=100)] = Field(
+        10,
+        description="fem, incremental: PCG iterations with the kept hierarchy before the step "
+        "is solved in full (0: no polish)",
+    )
     correction: Literal["none", "patch"] = Field(
         "patch",
         description="cnn and fem-previous/auto: 'patch' solves equilibrium exactly on the nodes "
