@@ -251,6 +251,7 @@ def test_updated_stiffness_equals_a_fresh_build_bit_for_bit(graded, consume):
         assert solver.updated and not fresh.updated
         assert np.array_equal(solver.K.data, fresh.K.data)
         assert np.array_equal(solver.scale, fresh.scale)
+        assert np.array_equal(solver._diag, fresh.K.diagonal())
         assert np.array_equal(solver.K_scaled.data, fresh.K_scaled.data)  # scaled in place too
         p = P0 + DP * healthy.any() * np.ones(mesh.n_nodes)
         assert np.array_equal(solver.solve(p).u, fresh.solve(p).u)

@@ -190,7 +190,9 @@ class MechanicsSolver:
             diag = _constrain(K, self.constrained)
         else:
             self._lift = None
-            diag = K.diagonal()
+            assert base is not None and changed_blocks is not None
+            diag = base.updated_diagonal(K, changed_blocks)
+        self._diag = diag
         self._constrained_rhs = diag[self.constraints.dofs] * self.constraints.values
         self.K = K
         # Symmetric Jacobi scaling D^-1/2 K D^-1/2: unit diagonal, so the smoother sees the
@@ -252,6 +254,15 @@ class MechanicsSolver:
         cm = self.constrained.reshape(-1, 3)
         K.data[blocks] = constrain_blocks(data, self._rows[blocks], K.indices[blocks], cm)
         return K, blocks
+
+    def updated_diagonal(self, K: sp.bsr_matrix, blocks: np.ndarray) -> np.ndarray:
+        """diag(K) (3 n_nodes,) for K, this solver's K with ``blocks`` changed: this solver's
+        diagonal with those of the changed blocks on the block diagonal read again."""
+        diag = self._diag.copy()
+        on = blocks[self._rows[blocks] == K.indices[blocks]]
+        idx = np.arange(3)
+        diag.reshape(-1, 3)[self._rows[on]] = K.data[on][:, idx, idx]
+        return diag
 
     def scaled_data(
         self,
