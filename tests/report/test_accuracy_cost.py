@@ -11,7 +11,7 @@ import pytest
 
 from diathermy.errors import SceneError
 from diathermy.physics.strain_energy import relative_strain_energy_error
-from diathermy.report.accuracy_cost import accuracy_cost_report
+from diathermy.report.accuracy_cost import accuracy_cost_report, common_steps
 from diathermy.report.budget import cheapest_within, resolve_accuracy_budget
 from diathermy.report.measure import load_fields
 from diathermy.report.variants import Variant
@@ -114,3 +114,62 @@ def test_accuracy_budget_ignores_runs_that_never_reached_the_mechanics(report):
     assert pick["variant"] != "cnn-w8" and pick["compared_steps"] > 0
     with pytest.raises(SceneError, match="never reached the mechanics"):
         cheapest_within({"rows": [vacuous]}, scene="tiny", max_strain_energy_error=1.0)
+
+
+def test_common_steps_match_times_across_time_steps():
+    t_ref = 0.01 * np.arange(1, 61)  # the reference at dt 0.01 s
+    t = np.cumsum(np.full(20, 0.03))  # a variant at 0.03 s, its times accumulated step by step
+    j = common_steps(t, t_ref)
+    assert np.array_equal(j, np.arange(2, 60, 3))
+    assert np.array_equal(common_steps([0.005, 0.6, 0.7], t_ref), [-1, 59, -1])
+    assert np.array_equal(common_steps([0.1], []), [-1])
+
+
+@pytest.fixture(scope="module")
+def dt_report(tmp_path_factory):
+    out = tmp_path_factory.mktemp("acc-dt")
+    scene = tiny_scene()
+    variants = [Variant("fem-dt0.03", dt_s=0.03), Variant("fem-dt0.09", dt_s=0.09)]
+    rows = accuracy_cost_report([scene], variants, steps=18, out=out, progress=False)
+    return scene, rows, out
+
+
+def test_time_step_variants_are_measured_against_dt_001_at_common_times(dt_report):
+    """A variant with its own dt runs the same simulated time and is compared with FEM at
+    dt 0.01 s at the times both have; a larger step costs accuracy, per simulated second less."""
+    scene, rows, out = dt_report
+    runs = {p.name.split("--")[1]: p for p in (out / "runs").glob("*.h5")}
+    ref_name = next(n for n in runs if n.startswith("reference-fem-") and n.endswith("dt0.01"))
+    ref = json.loads(runs[ref_name].parent.joinpath(runs[ref_name].stem + ".json").read_text())
+    assert len(ref["time_s"]) == round(18 * scene.dt_s / 0.01)
+    W_ref, _ = load_fields(runs[ref_name])
+    for row, dt in zip(rows, (0.03, 0.09), strict=True):
+        assert row.failed is None and row.dt_s == dt
+        path = runs[row.variant]
+        rec = json.loads(path.parent.joinpath(path.stem + ".json").read_text())
+        assert rec["time_s"][-1] == pytest.approx(ref["time_s"][-1])  # the same simulated time
+        W, _ = load_fields(runs[row.variant])
+        j = common_steps(np.asarray(rec["time_s"]), np.asarray(ref["time_s"]))
+        assert np.all(j >= 0)  # 0.03 and 0.09 are multiples of 0.01
+        errs = [
+            relative_strain_energy_error(W[i].astype(float), W_ref[k].astype(float))
+            for i, k in enumerate(j)
+            if W_ref[k].any()
+        ]
+        assert errs and row.compared_steps == len(errs)
+        assert row.se_error_max == pytest.approx(max(errs))
+    fine, coarse = rows
+    assert coarse.se_error_mean > fine.se_error_mean > 0  # the time step's own error
+
+
+def test_accuracy_budget_may_choose_a_larger_time_step(dt_report, tmp_path):
+    scene, rows, _ = dt_report
+    fast = {**asdict(rows[1]), "step_median_s": asdict(rows[0])["step_median_s"]}
+    data = {"rows": [asdict(rows[0]), fast]}  # same wall per step, 3x the simulated time
+    pick = cheapest_within(data, scene="tiny", max_strain_energy_error=1.0, dt_s=scene.dt_s)
+    assert pick["dt_s"] == 0.09
+    (tmp_path / "report.json").write_text(json.dumps(data))
+    budgeted = tiny_scene(accuracy_budget=AccuracyBudget(max_strain_energy_error=1.0))
+    resolved = resolve_accuracy_budget(budgeted, tmp_path / "report.json")
+    assert resolved.dt_s == 0.09
+    assert resolved.steps * resolved.dt_s == pytest.approx(budgeted.steps * budgeted.dt_s, 0.05)

@@ -57,6 +57,8 @@ class Row:
     compared_steps: int = 0  # steps where the reference had strain energy to compare against
     incremental: bool = False  # fem: the previous-displacement predictor (issue #25)
     full_every: int = 10
+    dt_s: float | None = None  # the variant's time step (None: the scene's; before issue #25)
+    guard: str = "auto"
 
     @property
     def worst_error(self) -> float:
@@ -77,10 +79,13 @@ PUBLISHED = (
 def _run(
     scene: Scene, variant: Variant, steps: int, out: Path, pool: ProcessPoolExecutor
 ) -> RunRecord:
-    """The variant's record, from disk if it was measured before with the same key."""
+    """The variant's record over the simulated time of ``steps`` of the scene's dt, from disk
+    if it was measured before with the same key."""
+    steps = variant.steps_for(scene, steps)
     key = variant.key(scene, steps)
     stem = out / "runs" / f"{scene.name}--{variant.name}--{key}"
-    rec_path, fields_path = stem.with_suffix(".json"), stem.with_suffix(".h5")
+    # not with_suffix: a variant's name may hold a dot ("fem-dt0.1")
+    rec_path, fields_path = stem.parent / f"{stem.name}.json", stem.parent / f"{stem.name}.h5"
     if rec_path.exists() and fields_path.exists():
         rec = RunRecord.from_json(rec_path.read_text())
         if rec.error is None:
@@ -93,16 +98,32 @@ def _run(
     return RunRecord.from_json(text)
 
 
-def _errors(var: Path, ref: Path) -> tuple[np.ndarray, np.ndarray]:
-    """Per-step strain-energy and displacement errors (NaN where the reference is at rest)."""
+def common_steps(t: np.ndarray, t_ref: np.ndarray, tol_s: float = 1e-9) -> np.ndarray:
+    """For each time of t (s), the index of the same time in t_ref (ascending), or -1 where it
+    has none (a variant at dt 0.03 s meets a reference at 0.01 s every third step)."""
+    t, t_ref = np.asarray(t, float), np.asarray(t_ref, float)
+    out = np.full(t.size, -1, dtype=np.int64)
+    if t_ref.size == 0:
+        return out
+    j = np.clip(np.searchsorted(t_ref, t - tol_s), 0, t_ref.size - 1)
+    hit = np.abs(t_ref[j] - t) <= tol_s
+    out[hit] = j[hit]
+    return out
+
+
+def _errors(
+    var: Path, ref: Path, t: np.ndarray, t_ref: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per-step strain-energy and displacement errors against the reference at the same time
+    (NaN where the reference is at rest or has no step at that time)."""
     W, u = load_fields(var)
     W_ref, u_ref = load_fields(ref)
     se = np.full(W.shape[0], np.nan)
     du = np.full(W.shape[0], np.nan)
-    for i in range(W.shape[0]):
-        if np.any(W_ref[i]):
-            se[i] = relative_strain_energy_error(W[i].astype(float), W_ref[i].astype(float))
-            du[i] = float(np.linalg.norm(u[i] - u_ref[i]) / np.linalg.norm(u_ref[i]))
+    for i, j in enumerate(common_steps(t[: W.shape[0]], t_ref[: W_ref.shape[0]])):
+        if j >= 0 and np.any(W_ref[j]):
+            se[i] = relative_strain_energy_error(W[i].astype(float), W_ref[j].astype(float))
+            du[i] = float(np.linalg.norm(u[i] - u_ref[j]) / np.linalg.norm(u_ref[j]))
     return se, du
 
 
@@ -145,8 +166,11 @@ def _row(
         ), np.array([])
     step = np.asarray(rec.step_s)
     mech = np.asarray(rec.effect_s.get("mechanics", [0.0]))
-    se, du = _errors(_fields_path(out, scene, rec), _fields_path(out, scene, ref))
     t = np.asarray(rec.time_s)
+    se, du = _errors(
+        _fields_path(out, scene, rec), _fields_path(out, scene, ref), t, np.asarray(ref.time_s)
+    )
+    dt, dt_ref = rec.variant.dt_s or scene.dt_s, ref.variant.dt_s or scene.dt_s
     active = np.isfinite(se)
     slope = float(np.polyfit(t[active], se[active], 1)[0]) if active.sum() >= 3 else 0.0
     mean = float(np.nanmean(se)) if active.any() else 0.0
@@ -163,7 +187,7 @@ def _row(
         step_p10_s=float(np.percentile(step, 10)),
         step_p90_s=float(np.percentile(step, 90)),
         mechanics_median_s=float(np.median(mech)),
-        speedup_vs_reference=float(np.median(ref.step_s) / np.median(step)),
+        speedup_vs_reference=float((np.median(ref.step_s) / dt_ref) / (np.median(step) / dt)),
         peak_rss_mb=rec.peak_rss_mb,
         se_error_max=float(np.nanmax(se)) if active.any() else 0.0,
         se_error_mean=mean,
@@ -180,6 +204,8 @@ def _row(
         compared_steps=int(active.sum()),
         incremental=rec.variant.incremental,
         full_every=rec.variant.full_every,
+        dt_s=dt,
+        guard=rec.variant.guard,
     ), se
 
 
@@ -239,7 +265,8 @@ def accuracy_cost_report(
             for variant in variants:
                 bar.set_postfix(scene=scene.name, variant=variant.name)
                 same_grid = tuple(variant.grid or scene.grid) == tuple(finest_grid)
-                ref = finest if same_grid else _run(scene, reference_for(variant), steps, out, pool)
+                shared = same_grid and variant.dt_s is None
+                ref = finest if shared else _run(scene, reference_for(variant), steps, out, pool)
                 rec = _run(scene, variant, steps, out, pool)
                 row, se = _row(scene, rec, ref, out, finest)
                 rows.append(row)
@@ -281,19 +308,22 @@ def write_outputs(
         f"Generated {stamp}; {steps} steps per run. Errors are against FEM at rtol 1e-10 on the same grid "
         "(cut volume and crater depth: against the finest grid's reference); 'compared steps' counts "
         "the steps in which the reference had strain energy at all (0: the run never reached the "
-        "mechanics, so its errors are 0 by construction); speed-up is against that reference. "
+        "mechanics, so its errors are 0 by construction); speed-up is against that reference, "
+        "per simulated second (a variant with its own dt is measured against FEM at rtol 1e-10 "
+        "and dt 0.01 s on the same grid, at their common times). "
         "Times are per full step "
         "(median, p10-p90), measured one variant at a time in its own process; read the ratios.",
         "",
-        "| scene | variant | grid | step s (p10-p90) | mech s | speed-up | peak MB | compared steps | SE err max | SE err mean | u err max | cut vol err | depth err | error grows | Pareto |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| scene | variant | grid | dt s | step s (p10-p90) | mech s | speed-up | peak MB | compared steps | SE err max | SE err mean | u err max | cut vol err | depth err | error grows | Pareto |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         if r.failed:
-            lines.append(f"| {r.scene} | {r.variant} | {r.grid} | failed: {r.failed} |" + " |" * 11)
+            lines.append(f"| {r.scene} | {r.variant} | {r.grid} | failed: {r.failed} |" + " |" * 12)
             continue
         lines.append(
-            f"| {r.scene} | {r.variant} | {r.grid} | {r.step_median_s:.3f} ({r.step_p10_s:.3f}-{r.step_p90_s:.3f}) "
+            f"| {r.scene} | {r.variant} | {r.grid} | {r.dt_s if r.dt_s is not None else '-'} "
+            f"| {r.step_median_s:.3f} ({r.step_p10_s:.3f}-{r.step_p90_s:.3f}) "
             f"| {r.mechanics_median_s:.3f} | {r.speedup_vs_reference:.2f}x | {r.peak_rss_mb:.0f} "
             f"| {r.compared_steps} | {r.se_error_max:.2e} | {r.se_error_mean:.2e} | {r.displacement_error_max:.2e} "
             f"| {r.cut_volume_error:.1%} | {r.crater_depth_error:.1%} | {'yes' if r.error_grows else 'no'} "

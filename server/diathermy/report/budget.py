@@ -22,9 +22,15 @@ def load_report(path: str | Path) -> dict[str, Any]:
 
 
 def cheapest_within(
-    report: dict[str, Any], *, scene: str, max_strain_energy_error: float, grid: str | None = None
+    report: dict[str, Any],
+    *,
+    scene: str,
+    max_strain_energy_error: float,
+    grid: str | None = None,
+    dt_s: float = 0.03,
 ) -> dict[str, Any]:
-    """The fastest measured row of ``scene`` (optionally on ``grid``) whose max error meets the budget."""
+    """The measured row of ``scene`` (optionally on ``grid``) whose max error meets the budget
+    at the least wall time per simulated second (rows without their own dt ran at ``dt_s``)."""
     rows = [
         r for r in report["rows"]
         if r["scene"] == scene and not r.get("failed") and (grid is None or r["grid"] == grid)
@@ -49,7 +55,7 @@ def cheapest_within(
             f"accuracy_budget.max_strain_energy_error: no measured variant of {scene!r} reaches "
             f"{max_strain_energy_error:g} (best measured: {best:.3g})"
         )
-    return min(ok, key=lambda r: r["step_median_s"])
+    return min(ok, key=lambda r: r["step_median_s"] / (r.get("dt_s") or dt_s))
 
 
 PACKAGED_REPORT = Path(__file__).with_name("data") / "accuracy_cost.json"
@@ -71,8 +77,12 @@ def resolve_accuracy_budget(scene: Scene, report_path: str | Path | None = None)
         scene=scene.name,
         max_strain_energy_error=scene.accuracy_budget.max_strain_energy_error,
         grid=grid,
+        dt_s=scene.dt_s,
     )
     data = scene.model_dump()
+    if row.get("dt_s") and row["dt_s"] != scene.dt_s:  # a larger step met the budget
+        data["steps"] = max(1, round(scene.steps * scene.dt_s / row["dt_s"]))
+        data["dt_s"] = row["dt_s"]
     data["mechanics"].update(
         backend=row["backend"], rtol=row["rtol"], guard_tolerance=row.get("guard_tolerance"),
         correction=row.get("correction", "none"),  # reports before the patch: the network's u
@@ -80,6 +90,7 @@ def resolve_accuracy_budget(scene: Scene, report_path: str | Path | None = None)
     )  # fmt: skip
     if row["backend"] == "fem":  # rows measured before issue #25 solved in full
         data["mechanics"]["full_every"] = row.get("full_every", 10)
+        data["mechanics"]["guard"] = row.get("guard", "auto")
         data["solver"]["incremental"] = bool(row.get("incremental", False))
         if row["variant"] != "previous":  # persistence patched but alone: rows before #22 said
             data["mechanics"]["correction"] = "patch"  # "none" for fem and patched all the same

@@ -28,11 +28,21 @@ class Variant:
     correction: Literal["none", "patch"] = "none"  # cnn and fem-incremental: u as is, or patched
     incremental: bool = False  # fem: the previous-displacement predictor (issue #25)
     full_every: int = 10  # ... with a full solve at least every this many solves
+    guard: Literal["auto", "residual", "energy"] = "auto"  # fem-incremental: what accepts
+    dt_s: float | None = None  # the time step; None: the scene's
+
+    def steps_for(self, scene: Scene, steps: int) -> int:
+        """This variant's steps over the simulated time of ``steps`` of the scene's dt."""
+        if self.dt_s is None:
+            return steps
+        return max(1, round(steps * scene.dt_s / self.dt_s))
 
     def apply(self, scene: Scene, steps: int) -> Scene:
-        """The scene as this variant runs it."""
+        """The scene as this variant runs it (``steps`` of the variant's own dt)."""
         data = scene.model_dump()
         data["steps"] = steps
+        if self.dt_s is not None:
+            data["dt_s"] = self.dt_s
         if self.grid is not None:  # a uniform grid replaces a graded scene's resolution
             data["grid"], data["resolution"] = list(self.grid), None
         data["solver"] = {
@@ -48,6 +58,7 @@ class Variant:
             "guard_tolerance": self.guard_tolerance,
             "correction": self.correction,
             "full_every": self.full_every,
+            "guard": self.guard,
         }
         return scene_from_dict(data)
 
@@ -59,8 +70,21 @@ class Variant:
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
+DT_REFERENCE_S = 0.01
+"""The time step of the reference a variant with its own dt is measured against."""
+
+
 def reference_for(variant: Variant) -> Variant:
-    """The FEM run at tight tolerance on the same grid, which the variant is measured against."""
+    """The FEM run at tight tolerance on the same grid, which the variant is measured against;
+    for a variant with its own time step, at ``DT_REFERENCE_S`` (compared at common times)."""
+    if variant.dt_s is not None:
+        return Variant(
+            name=f"reference-fem-{_grid_name(variant.grid)}-dt{DT_REFERENCE_S:g}",
+            backend="fem",
+            rtol=1e-10,
+            grid=variant.grid,
+            dt_s=DT_REFERENCE_S,
+        )
     return Variant(
         name=f"reference-fem-{_grid_name(variant.grid)}",
         backend="fem",
@@ -80,8 +104,9 @@ NO_INTERVAL = 10000
 
 
 def default_variants(models: dict[str, str] | None = None) -> list[Variant]:
-    """FEM at four tolerances, monolithic coupling, a coarser grid and incremental stepping (a full
-    solve every 10 and every 50 steps), the baseline persistence ('previous': the last
+    """FEM at four tolerances, monolithic coupling, a coarser grid, incremental stepping (a full
+    solve every 10 and every 50 steps; the energy guard), the time step (dt 0.01, 0.03 and 0.1 s,
+    against a reference at dt 0.01 s), the baseline persistence ('previous': the last
     displacement Ritz-scaled; alone and with the patch, no guard, no interval: as the
     network's variants), plus the surrogates given.
 
@@ -101,6 +126,16 @@ def default_variants(models: dict[str, str] | None = None) -> list[Variant]:
         Variant(
             "fem-incremental-full50", rtol=1e-6, incremental=True, full_every=50,
             correction="patch",
+        ),
+        Variant(
+            "fem-incremental-energy", rtol=1e-6, incremental=True, correction="patch",
+            guard="energy",
+        ),
+        Variant("fem-dt0.01", rtol=1e-6, dt_s=0.01),
+        Variant("fem-dt0.03", rtol=1e-6, dt_s=0.03),
+        Variant("fem-dt0.1", rtol=1e-6, dt_s=0.1),
+        Variant(
+            "fem-incremental-dt0.1", rtol=1e-6, incremental=True, correction="patch", dt_s=0.1
         ),
         Variant(
             "previous", incremental=True, correction="none", guard_tolerance=NO_GUARD,
