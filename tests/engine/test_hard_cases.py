@@ -64,8 +64,11 @@ def assert_sane(sim: Simulation, rep: StepReport) -> None:
     solver_slack = 10 * sim.scene.solver.thermal_rtol * heat_content * rep.step
     assert abs(e["imbalance"]) <= 1e-6 * e["joule_in"] + solver_slack, (rep.step, e)
     el = rep.effects.get("electric")
-    if el is not None and el.ran:
-        assert el.extra["residual"] <= sim.scene.solver.electric_rtol * 1.01, rep.step
+    if el is not None and el.ran:  # the energy guard's estimate, or a solve to rtol
+        if el.extra["mode"] == "local":
+            assert el.extra["energy_estimate"] <= el.extra["energy_tolerance"], rep.step
+        else:
+            assert el.extra["residual"] <= sim.scene.solver.electric_rtol * 1.01, rep.step
     mech = rep.effects.get("mechanics")
     if mech is not None and mech.ran:  # the incremental path: its guard; a full solve: rtol
         if "energy_estimate" in mech.extra and mech.extra["mode"] == "local":  # polished

@@ -143,6 +143,37 @@ def test_potential_resolved_only_when_sigma_or_contact_change(paper_meshes):
     assert np.allclose(hotter.V, first.V / 1.1, rtol=1e-8, atol=1e-8 * first.V.max())
 
 
+@pytest.mark.parametrize("tol", [1e-3, 1e-5])
+def test_energy_guard_accepts_a_potential_within_its_tolerance(paper_meshes, tol):
+    """With an energy tolerance a changed conductivity is solved by PCG from the last potential
+    with the kept hierarchy until the energy-error estimate passes: the potential is then within
+    a few x tol of the rtol solution in the energy norm, the power within ~tol, in fewer
+    iterations than the solve to rtol."""
+    mesh = paper_meshes[(17, 17, 33)]
+    contact = contact_weights(mesh, PAPER_CENTER, A_M)
+    c = mesh.centroids()
+    hot = np.linalg.norm(c - PAPER_CENTER, axis=1) < 0.012  # desiccated under the contact
+    sigma = np.where(hot, 0.2 * SIGMA, SIGMA)
+    runs = {}
+    for name, kw in (("guarded", {"energy_tolerance": tol}), ("exact", {"rtol": 1e-12})):
+        _, solver = setup(mesh, **kw)
+        driven = DrivenPotential(solver)
+        driven.solve(SIGMA, contact, ElectrodeDrive())  # builds the hierarchy, the warm start
+        runs[name] = (solver, driven.solve(sigma, contact, ElectrodeDrive()))
+    solver, guarded = runs["guarded"]
+    _, exact = runs["exact"]
+    assert guarded.stats.energy_estimate is not None and guarded.stats.energy_estimate <= tol
+    e = guarded.V - exact.V
+    K = solver.matrix
+    free = solver.free
+    energy = np.sqrt(e[free] @ (K @ e[free]) / (exact.V[free] @ (K @ exact.V[free])))
+    assert energy <= 5 * tol
+    assert abs(guarded.power_w - exact.power_w) <= 2 * tol * exact.power_w
+    assert 0 < guarded.stats.iterations < exact.stats.iterations
+    _, plain = setup(mesh)
+    assert plain.energy_tolerance is None  # the default solver solves to rtol
+
+
 # --- analytic references -----------------------------------------------------------------------
 
 

@@ -48,6 +48,9 @@ class EngineContext:
                 mesh,
                 stiffness,
                 rtol=scene.solver.electric_rtol,
+                energy_tolerance=scene.solver.electric_energy_tolerance
+                if scene.solver.incremental
+                else None,
                 stale_factor=POTENTIAL_STALE_FACTOR,
                 max_stale_solves=POTENTIAL_MAX_STALE_SOLVES,
             )

@@ -21,7 +21,7 @@ iterations and give identity errors 5e-9 / 4e-11 / 7e-13 and max errors in V of 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -29,6 +29,7 @@ import scipy.sparse as sp
 
 from diathermy.errors import SceneError, SolverDivergedError
 from diathermy.fem.edges import EdgeStiffness, LaplacianPattern, laplacian_pattern
+from diathermy.fem.energy_cg import EnergyCG, energy_cg
 from diathermy.fem.multigrid import SCALAR_AMG_OPTIONS, scaled_candidates, unit_diagonal
 from diathermy.fem.solvers import KrylovSolver, ReuseState, SolveStats
 from diathermy.mesh import TetMesh
@@ -75,6 +76,7 @@ class PotentialStats:
     solve_s: float
     reassembled: bool
     cached: bool
+    energy_estimate: float | None = None  # set when the energy guard accepted the answer
 
 
 class PotentialSolver:
@@ -102,7 +104,11 @@ class PotentialSolver:
         amg_options: dict[str, Any] | None = None,
         stale_factor: float = 1.5,
         max_stale_solves: int = 0,
+        energy_tolerance: float | None = None,
+        energy_maxiter: int = 30,
     ) -> None:
+        self.energy_tolerance = energy_tolerance
+        self.energy_maxiter = energy_maxiter
         fixed = mesh.side_nodes("z-") if dirichlet_nodes is None else np.unique(dirichlet_nodes)
         free = np.setdiff1d(np.arange(mesh.n_nodes), fixed)
         self.stiffness = stiffness
@@ -158,18 +164,50 @@ class PotentialSolver:
         """V (n_nodes,) for a nodal load (n_nodes,) in A; dirichlet_values (n_fixed,) default 0."""
         if self.weights is None:
             raise SceneError("potential: set_conductivity before solve")
+        t0 = time.perf_counter()
         V = np.zeros(self.stiffness.n_nodes)
         b = load[self.free].astype(float, copy=True)
         if dirichlet_values is not None:
             V[self.fixed] = dirichlet_values
             b -= self._lift(V)
-        y, st = self.krylov.solve(self._scale * b)
+        bs = self._scale * b
+        guarded = self._energy_guarded(bs)
+        if guarded is not None and guarded.estimate <= (self.energy_tolerance or 0.0):
+            self.krylov.warm_start = guarded.x
+            V[self.free] = self._scale * guarded.x
+            stats = PotentialStats(
+                guarded.iterations,
+                guarded.residual,
+                self._pending_assembly_s,
+                0.0,
+                time.perf_counter() - t0,
+                self._pending_assembly_s > 0,
+                False,
+                energy_estimate=guarded.estimate,
+            )
+            self._pending_assembly_s = 0.0
+            return V, stats
+        y, st = self.krylov.solve(bs, None if guarded is None else guarded.x)
         if st.rebuilt:
             self.hierarchy_sigma = self.sigma
         V[self.free] = self._scale * y
         stats = _stats(st, self._pending_assembly_s, reassembled=self._pending_assembly_s > 0)
+        if guarded is not None:
+            its = guarded.iterations + stats.iterations
+            stats = replace(stats, iterations=its, solve_s=time.perf_counter() - t0)
         self._pending_assembly_s = 0.0
         return V, stats
+
+    def _energy_guarded(self, b: np.ndarray) -> EnergyCG | None:
+        """PCG on the scaled system from the last potential with the kept hierarchy until the
+        energy-error estimate reaches ``energy_tolerance`` (None: no guard, nothing to start
+        from, or no hierarchy to keep; the full solve then runs as before)."""
+        M, x0, A = self.krylov.kept_preconditioner, self.krylov.warm_start, self.krylov.A
+        if self.energy_tolerance is None or M is None or A is None or x0 is None:
+            return None
+        if x0.shape != b.shape:
+            return None
+        return energy_cg(A, b, x0, M, tol=self.energy_tolerance, maxiter=self.energy_maxiter)
 
     def restore_hierarchy(self, sigma: np.ndarray, reuse: ReuseState) -> None:
         """Rebuild the AMG hierarchy of conductivity sigma (n_tets,) S/m with its reuse counters

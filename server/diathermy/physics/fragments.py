@@ -67,3 +67,60 @@ def find_fragments(
     loose = np.zeros(mesh.n_tets, dtype=bool)
     loose[ids] = ~anchored[comp]
     return Fragments(labels, n_comp, loose)
+
+
+def update_fragments(
+    mesh: TetMesh,
+    previous: Fragments,
+    previous_healthy: np.ndarray,
+    healthy: np.ndarray,
+    constrained: np.ndarray,
+    centroids: np.ndarray,
+    *,
+    margin: float = 3.0,
+) -> Fragments | None:
+    """The fragments after a cut removed tets from ``previous_healthy`` (bool (n_tets,)), when a
+    search near the cut proves the components unchanged; None when it cannot (a full search is
+    needed: tets healed, a fragment was loose, the cut touches a constrained node, or the
+    healthy neighbours of the removed tets are not connected within ``margin`` x the cut's
+    extent of it). ``centroids`` (n_tets, 3) m of ``mesh``.
+
+    Why it is exact: a path between two healthy tets that ran through removed tets enters and
+    leaves them at their healthy neighbours, which stay connected; the constrained nodes of a
+    component all stay (no removed tet touches one), so its anchoring does too.
+    """
+    healthy = np.asarray(healthy, dtype=bool)
+    if previous.loose.any() or np.any(healthy & ~previous_healthy):
+        return None
+    removed = np.flatnonzero(previous_healthy & ~healthy)
+    if removed.size == 0:
+        return previous
+    held = np.any(np.asarray(constrained).reshape(-1, 3), axis=1)
+    if held[mesh.tets[removed]].any():
+        return None
+    nb = mesh.neighbours[removed].ravel()
+    border = np.unique(nb[nb >= 0])
+    border = border[healthy[border]]
+    lost = np.unique(previous.labels[removed])
+    if border.size == 0 or not np.isin(lost, previous.labels[border]).all():
+        return None  # a component may have been cut away whole
+    corners = mesh.points[mesh.tets[removed]]
+    extent = float(np.max(corners.max(axis=1) - corners.min(axis=1)))
+    lo = corners.min(axis=(0, 1)) - margin * extent
+    hi = corners.max(axis=(0, 1)) + margin * extent
+    region = np.flatnonzero(healthy & np.all((centroids >= lo) & (centroids <= hi), axis=1))
+    local = np.full(mesh.n_tets, -1, dtype=np.int64)
+    local[region] = np.arange(region.size)
+    nbr = mesh.neighbours[region]
+    keep = nbr >= 0
+    keep[keep] = local[nbr[keep]] >= 0
+    rows = np.repeat(np.arange(region.size), 4).reshape(-1, 4)[keep]
+    graph = sp.csr_matrix(
+        (np.ones(rows.size), (rows, local[nbr[keep]])), (region.size, region.size)
+    )
+    _, comp = connected_components(graph, directed=False)
+    if np.unique(comp[local[border]]).size != 1:
+        return None
+    labels = previous.labels.copy()
+    labels[removed] = -1
+    return Fragments(labels, previous.n_components, previous.loose)

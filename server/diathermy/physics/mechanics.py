@@ -38,7 +38,7 @@ from diathermy.fem.solvers import KrylovSolver
 from diathermy.fem.sparsity import build_pattern
 from diathermy.mesh import TetMesh
 from diathermy.physics.constraints import Constraints, clamped_bottom
-from diathermy.physics.fragments import find_fragments
+from diathermy.physics.fragments import find_fragments, update_fragments
 
 _CHEBYSHEV = ("chebyshev", {"degree": 3})
 DEFAULT_AMG_OPTIONS: dict[str, Any] = {
@@ -171,7 +171,18 @@ class MechanicsSolver:
             base = None
         if base is None and np.linalg.matrix_rank(B[self.constrained]) < 6:
             raise SceneError("the constraints leave rigid-body motions of the block free")
-        self.fragments = find_fragments(mesh, healthy, self.constrained)
+        # the loose-fragment search of a cut: near the cut when that proves it (see fragments)
+        self._centroids: np.ndarray | None = None
+        fragments = None
+        if base is not None:
+            c = base._centroids if base._centroids is not None else mesh.centroids()
+            self._centroids = c
+            fragments = update_fragments(
+                mesh, base.fragments, base.healthy, healthy, self.constrained, c
+            )
+        if fragments is None:
+            fragments = find_fragments(mesh, healthy, self.constrained)
+        self.fragments = fragments
         if loose_fragments == "remove" and self.fragments.loose.any():
             E[self.fragments.loose] = ersatz_ratio * E.max()
             healthy = healthy & ~self.fragments.loose

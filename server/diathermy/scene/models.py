@@ -115,6 +115,13 @@ class SolverConfig(_Model):
     """Accuracy knobs of the electro-thermal solves."""
 
     electric_rtol: Annotated[float, Field(gt=0, lt=1)] = 1e-9
+    electric_energy_tolerance: Annotated[float, Field(gt=0, lt=1)] | None = Field(
+        1e-5,
+        description="incremental: the potential is accepted once PCG from the last one with "
+        "the kept AMG hierarchy estimates its relative energy-norm error at most this (the "
+        "power it delivers to ~its square), else solved to electric_rtol; null: always to "
+        "electric_rtol",
+    )
     thermal_rtol: Annotated[float, Field(gt=0, lt=1)] = 1e-9
     coupling: Literal["staggered", "monolithic"] = "staggered"
     incremental: bool = Field(

@@ -95,6 +95,24 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
             "conductivity and contact unchanged: potential reused (scaled to the drive)",
             extra={"current_a": sol.current_a},
         )
+    elif sol.stats.energy_estimate is not None:
+        tol = ctx.scene.solver.electric_energy_tolerance
+        report = EffectReport(
+            True,
+            iterations=sol.stats.iterations,
+            extra={
+                "current_a": sol.current_a,
+                "residual": sol.stats.residual,
+                "reassembled": sol.stats.reassembled,
+                "setup_s": 0.0,
+                "energy_estimate": sol.stats.energy_estimate,
+                "energy_tolerance": tol,
+                "mode": "local",
+                "why": f"{sol.stats.iterations} CG iterations from the last potential with the "
+                f"kept hierarchy: energy-error estimate {sol.stats.energy_estimate:.1e} <= "
+                f"{tol:.0e}",
+            },
+        )
     else:
         report = EffectReport(
             True,
