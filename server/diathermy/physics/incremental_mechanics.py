@@ -231,6 +231,7 @@ class IncrementalFEMBackend:
         local: LocalSolve,
         rescaled: bool,
         extra: dict[str, float | int | bool | str],
+        iterations: int = 0,
     ) -> MechanicsOutput:
         """The predictor's answer u (n_nodes, 3) m taken as this step's; ``rescaled``: u is the
         Ritz-scaled warm start but on the patch (its strain energy is updated, not recomputed)."""
@@ -241,6 +242,7 @@ class IncrementalFEMBackend:
         extra.update(mode="local")
         return MechanicsOutput(
             u=u,
+            iterations=iterations,
             residual=residual,
             rebuilt=rebuilt,
             loose_tets=loose if loose.any() else None,
@@ -315,7 +317,10 @@ class IncrementalFEMBackend:
                         f"hierarchy: energy-error estimate {polished.estimate:.1e} <= {etol:.0e}",
                     )
                     u = (polished.x * solver.scale).reshape(-1, 3)
-                    return self._accept(solver, u, polished.residual, rebuilt, local, False, extra)
+                    return self._accept(
+                        solver, u, polished.residual, rebuilt, local, False, extra,
+                        iterations=polished.iterations,
+                    )  # fmt: skip
                 why = (
                     f"{why}; energy-error estimate {polished.estimate:.1e} > {etol:.0e} after "
                     f"{polished.iterations} CG iterations"
