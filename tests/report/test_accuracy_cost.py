@@ -158,6 +158,10 @@ def test_time_step_variants_are_measured_against_dt_001_at_common_times(dt_repor
         ]
         assert errs and row.compared_steps == len(errs)
         assert row.se_error_max == pytest.approx(max(errs))
+        cut_ref = ref["cut_volume_m3"][-1]  # the crater against the dt 0.01 s reference too
+        if cut_ref > 0:
+            want = abs(rec["cut_volume_m3"][-1] - cut_ref) / cut_ref
+            assert row.cut_volume_error == pytest.approx(want)
     fine, coarse = rows
     assert coarse.se_error_mean > fine.se_error_mean > 0  # the time step's own error
 
