@@ -38,7 +38,7 @@ from diathermy.fem.solvers import KrylovSolver
 from diathermy.fem.sparsity import build_pattern
 from diathermy.mesh import TetMesh
 from diathermy.physics.constraints import Constraints, clamped_bottom
-from diathermy.physics.fragments import find_fragments, update_fragments
+from diathermy.physics.fragments import Fragments, find_fragments, update_fragments
 
 _CHEBYSHEV = ("chebyshev", {"degree": 3})
 DEFAULT_AMG_OPTIONS: dict[str, Any] = {
@@ -134,6 +134,10 @@ class MechanicsSolver:
         consume_base: update ``base``'s matrices in place instead of copying them; ``base``
             is then ``consumed`` and can neither solve nor be updated again.
     """
+
+    fragments: Fragments
+    healthy: np.ndarray
+    _rows: np.ndarray  # block row of each stored block of K
 
     def __init__(
         self,
