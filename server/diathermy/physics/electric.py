@@ -92,6 +92,9 @@ class PotentialSolver:
         rtol: relative residual of the CG solve.
         stale_factor, max_stale_solves: when a conductivity change keeps the AMG hierarchy of
             an older one (``KrylovSolver``); a checkpoint saves its origin (``hierarchy_sigma``).
+        energy_tolerance: accept the PCG iterate from the last solution with the kept hierarchy
+            once its estimated relative energy-norm error (``fem.energy_cg``) is at most this,
+            within ``energy_maxiter`` iterations; else (and when None) solve to ``rtol``.
     """
 
     def __init__(
