@@ -161,19 +161,20 @@ class Server:
 
 def control_latencies(
     sent: dict[int, float], acked: dict[int, int], frames: list[tuple[float, int, int]]
-) -> list[float]:
-    """Seconds from sending each control to the first frame received after it whose
+) -> list[tuple[float, int]]:
+    """(seconds, step) from sending each control to the first frame received after it whose
     ``control_id`` is at least the control's (ids grow in the order the engine applies them,
-    so that frame is the first to show it applied). ``sent``: tag -> send time; ``acked``:
-    tag -> control id; ``frames``: (receive time, control_id, step) in order."""
+    so that frame is the first to show it applied), and that frame's step. ``sent``: tag ->
+    send time; ``acked``: tag -> control id; ``frames``: (receive time, control_id, step) in
+    order."""
     out = []
     for tag, t_sent in sent.items():
         cid = acked.get(tag)
         if cid is None:
             continue
-        t = next((t for t, c, _ in frames if t > t_sent and c >= cid), None)
-        if t is not None:
-            out.append(t - t_sent)
+        got = next(((t, s) for t, c, s in frames if t > t_sent and c >= cid), None)
+        if got is not None:
+            out.append((got[0] - t_sent, got[1]))
     return out
 
 
@@ -230,6 +231,7 @@ async def stream_client(
         counted: list[tuple[float, int]] = []  # (receive time, step) from t_start
         sent: dict[int, float] = {}  # tag -> send time
         acked: dict[int, int] = {}  # tag -> control id
+        walls: dict[int, float] = {}  # step -> the engine's wall time for it (frame report)
         tag = index * 1_000_000  # unique across clients (the trace joins on it)
         t_end = t_start + seconds
         next_control = t_start
@@ -252,6 +254,8 @@ async def stream_client(
                 acked[msg["tag"]] = msg["control_id"]
             elif msg["type"] == "frame":
                 frames.append((t, msg["control_id"], msg["step"]))
+                if msg.get("report"):
+                    walls[msg["step"]] = float(msg["report"]["wall_s"])
                 if t >= t_start:
                     counted.append((t, msg["step"]))
                     dropped = msg["dropped"]
@@ -265,7 +269,7 @@ async def stream_client(
     out["steps_per_s"] = (counted[-1][1] - counted[0][1]) / span
     out["latencies"] = control_latencies(sent, acked, frames)
     out["dropped"] = dropped
-    out["sent"], out["acked"], out["frames"] = sent, acked, frames
+    out["sent"], out["acked"], out["frames"], out["walls"] = sent, acked, frames, walls
 
 
 def client_process(
@@ -393,7 +397,8 @@ def grid_rows(
     rows = []
     for n in clients:
         row: dict[str, Any] = {"clients": n, "reps": reps}
-        keys = ("steps_per_s", "fps_per_client", "p50_ms", "p99_ms", "vs_alone")
+        keys = ("steps_per_s", "fps_per_client", "p50_ms", "p99_ms", "vs_alone", "step_p50_ms")
+        keys += ("step_p99_ms", "step_max_ms", "beyond_p99_ms")
         for key in (*keys, "server_cpu", "engine_cpu", "client_cpu", "engine_wait"):
             row[key] = statistics.median(r[key] for r in runs[n])
         row["samples"] = sum(r["samples"] for r in runs[n])
@@ -427,8 +432,18 @@ def fan_out(server: Server, sid: str, n: int, seconds: float, rate_hz: float) ->
         proc.join()
         if proc.exitcode:
             raise RuntimeError(f"a benchmark client process exited with code {proc.exitcode}")
-    lat = sorted(x for o in outs for x in o["latencies"])
+    lat = sorted(x for o in outs for x, _ in o["latencies"])
     q = statistics.quantiles(lat, n=100) if len(lat) >= 2 else [float("nan")] * 99
+    by_step = {k: v for o in outs for k, v in o["walls"].items()}
+    walls = sorted(by_step.values())
+    qw = statistics.quantiles(walls, n=100) if len(walls) >= 2 else [float("nan")] * 99
+    beyond = [  # beyond the engine's own time for the frame's step and the one before it
+        x - by_step[s] - by_step[s - 1]
+        for o in outs
+        for x, s in o["latencies"]
+        if s in by_step and s - 1 in by_step
+    ]
+    qb = statistics.quantiles(beyond, n=100) if len(beyond) >= 2 else [float("nan")] * 99
     steps_per_s = statistics.median(o["steps_per_s"] for o in outs)
     return {
         "clients": n,
@@ -441,6 +456,10 @@ def fan_out(server: Server, sid: str, n: int, seconds: float, rate_hz: float) ->
         "p99_ms": 1e3 * q[98],
         "samples": len(lat),
         "dropped": sum(o["dropped"] for o in outs),
+        "step_p50_ms": 1e3 * qw[49],
+        "step_p99_ms": 1e3 * qw[98],
+        "step_max_ms": 1e3 * walls[-1] if walls else float("nan"),
+        "beyond_p99_ms": 1e3 * qb[98],
         "outs": outs,
     }
 
@@ -517,8 +536,9 @@ def fan_table(grid: str, alone: float, fan: list[dict[str, Any]]) -> list[str]:
         "",
         "| clients | steps/s | vs alone | frames/s per client | per client / steps/s | "
         "latency p50 ms | latency p99 ms | p99 bound ms | samples | frames dropped | "
+        "engine step ms p50 / p99 / max | p99 beyond its two steps ms | "
         "CPU server / engine / clients | engine waits for a CPU | targets |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
     for r in fan:
         bound = r["p99_bound_ms"]
@@ -539,7 +559,9 @@ def fan_table(grid: str, alone: float, fan: list[dict[str, Any]]) -> list[str]:
             f"| {r['clients']} | {r['steps_per_s']:.1f} | {r['vs_alone']:.2f} | "
             f"{r['fps_per_client']:.1f} | {r['fps_per_client'] / r['steps_per_s']:.2f} | "
             f"{r['p50_ms']:.1f} | {r['p99_ms']:.1f} | {bound:.0f} | {r['samples']} | "
-            f"{r['dropped']} | {r['server_cpu']:.2f} / {r['engine_cpu']:.2f} / "
+            f"{r['dropped']} | {r['step_p50_ms']:.0f} / {r['step_p99_ms']:.0f} / "
+            f"{r['step_max_ms']:.0f} | {r['beyond_p99_ms']:.1f} | "
+            f"{r['server_cpu']:.2f} / {r['engine_cpu']:.2f} / "
             f"{r['client_cpu']:.2f} | {100 * r['engine_wait']:.0f} % | {verdict} |"
         )
     return lines + [""]
@@ -569,14 +591,24 @@ def write_report(
         "row is the median of the repetitions; the configurations run interleaved (alone, 1, 4, "
         "16, alone, ...) on fresh sessions, and *vs alone* is the median of each run's ratio to "
         "the alone run just before it, so that the shared machine's drifting load cancels. "
+        "Clients: up to 4 per forked client process (`service_client.py`), each a WebSocket "
+        "client that reads every byte of every frame off its socket into one buffer and keeps "
+        "only the message's header (step, `control_id`, report, `dropped`; the arrays come "
+        "last and are skipped unread), so that the latency is the service's and not that of "
+        "a Python client decoding 16 x 1.2 MB per step in one process (the client before this "
+        "one, `service_trace.py` replays it). "
         "CPU: cores used during the row by the server process, by its engine processes and by "
-        "the benchmark's client process (the clients decode every frame in Python and share the "
-        "cores with the server). Latency: from sending an "
-        "electrode control message to the first frame whose `control_id` shows it applied; "
-        "every client sends one every 0.25 s. Frames dropped: coalesced for clients that fell "
-        "behind (summed). Targets: frames/s per client >= 0.9 x steps/s, steps/s with 16 "
-        "clients >= 0.9 x alone, p99 <= 2 step times + 20 ms (a control waits for the step in "
-        "progress, then its own step).",
+        "the benchmark's client processes (which share the 2 cores with them). Latency: from "
+        "sending an electrode control message to the first frame whose `control_id` shows it "
+        "applied (the ack gives the control's id; the frame may come before the ack); every "
+        "client sends one every 0.25 s, right after a frame arrives, which is the worst phase: "
+        "the step in progress has just begun. Frames dropped: coalesced for clients that fell "
+        "behind (summed). Engine step: the engine's own wall time per step (the frames' "
+        "reports); *p99 beyond its two steps*: each control's latency less the wall times of the "
+        "step that showed it and the step before (the one it waited for), i.e. what the service "
+        "adds. Targets: frames/s per client >= 0.9 x steps/s, steps/s with 16 "
+        "clients >= 0.9 x alone, p99 <= 2 step times + 20 ms, step time = 1 / steps/s of the "
+        "row (a control waits for the step in progress, then its own step).",
         "",
         "Scene: the built-in `default` (50 W) with only its electric and thermal effects, on "
         "17x17x33 and on its own 33x33x65 grid: a steady cost per step, so that rows compare "
@@ -602,17 +634,21 @@ def write_report(
         "than the step). So the sockets' writes no longer take GIL time from the engine, and "
         "with BLAS on one thread (`DIATHERMY_BLAS_THREADS`, default 1, as `diathermy serve` "
         "sets) the engine takes one core and leaves the other to the event loop, the kernel's "
-        "copies and the clients.",
+        "copies and the clients. The frame of a step is written first to the clients whose last "
+        "electrode control it is the first to show (`hub.py`), and the senders are woken one "
+        "per turn of the event loop, so that a control that arrives while a frame goes out to "
+        "16 clients is read after one write, not sixteen.",
         "",
         "CPU column: *server* is the server process (event loop, HTTP, journal), *engine* its "
-        "engine processes, *clients* the benchmark's client process. Every step moves 16 x the "
-        "frame over loopback (150 kB on 17x17x33, 1.2 MB on 33x33x65), which the clients decode "
-        "in Python: on 2 cores shared with other jobs the clients fall behind first (frames "
-        "dropped, latency queued in the sockets). *Engine waits for a CPU*: the share of the "
+        "engine processes, *clients* the benchmark's client processes. Every step moves 16 x the "
+        "frame over loopback (150 kB on 17x17x33, 1.2 MB on 33x33x65): the server's writes and "
+        "the kernel's copies share the 2 cores with the engine. *Engine waits for a CPU*: the "
+        "share of the "
         "row's wall time the engine process was runnable but not running (its run-queue delay, "
         "`/proc/<pid>/schedstat`): time the other jobs, the server and the clients took from "
         "it, which no change in the service's protocol wins back.",
         "",
+        *trace_section(),
         "## Bytes per frame",
         "",
         "A 2 x 1 x 1 cm block under 200 W, stepped until it cuts.",
@@ -646,6 +682,15 @@ def write_report(
         "",
     ]
     path.write_text("\n".join(lines), encoding="utf-8")
+
+
+def trace_section() -> list[str]:
+    """The latency breakdown of ``service_trace.py`` (its last results), headings demoted."""
+    path = ROOT / "benchmarks" / "results" / "service_trace.md"
+    if not path.exists():
+        return []
+    text = path.read_text(encoding="utf-8").strip().splitlines()
+    return [("#" + ln if ln.startswith("#") else ln) for ln in text] + [""]
 
 
 def main() -> None:

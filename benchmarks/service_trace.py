@@ -1,15 +1,16 @@
 """Where a control's latency goes: timestamps along the path of each electrode control of the
 service benchmark, from the client's send to the frame that shows it applied.
 
-    python benchmarks/service_trace.py [--grid 33x33x65] [--clients 1,4,16] [--seconds 4]
+    python benchmarks/service_trace.py [--grids 17x17x33,33x33x65] [--clients 1,4,16]
 
 The server child of ``service.py`` runs with hooks that log, on the machine's monotonic clock
 (one clock for all processes): the control handled by the event loop, sent to the engine,
 applied by the engine, journaled; each step started, done and its frame encoded in the engine
 process, the reply sent and received by the server, journaled, handed to the clients, written
 to each client's socket; and the client's receive. Writes ``benchmarks/results/service_trace.md``
-(median and p99 of each segment per client count). ``--full-decode --procs-per-16 1`` replays
-the old client (one process, every frame decoded).
+(median and p99 of each segment per client count), for the service and client as they were
+before (``before``: the ``websockets`` client decoding every frame in one process, frames written
+in subscriber order, all senders woken at once) and as they are (``now``).
 """
 
 from __future__ import annotations
@@ -178,7 +179,14 @@ def serve_child(args: argparse.Namespace) -> None:
         from diathermy.service import hub
 
         hub.Subscriber.first_shown_by = lambda self, frame: False  # type: ignore[method-assign]
+        hub.wake_in_turn = _wake_all  # type: ignore[assignment]
     svc().serve_child(args)
+
+
+def _wake_all(slots: list[Any]) -> None:
+    """The senders' wake-up before: all of them in one turn of the event loop."""
+    for slot in slots:
+        slot.wake()
 
 
 def svc() -> Any:
@@ -215,8 +223,10 @@ def load_events(trace_dir: Path) -> list[dict[str, Any]]:
 
 def breakdown(
     events: list[dict[str, Any]], outs: list[dict[str, Any]], a: float, b: float
-) -> tuple[list[dict[str, float]], list[float], list[float]]:
-    """Each control's timestamps along its path (a row per control) and the steps' times."""
+) -> dict[str, Any]:
+    """Each control's timestamps along its path (``rows``, one per control), and per step: the
+    engine's step times (``steps``; ``after``: those right after a control) and the time from
+    handing a frame to the clients to its write to the last one (``spread``)."""
 
     def t_of(e: dict[str, Any]) -> float:
         return float(e.get("t", e.get("t0", 0.0)))
@@ -230,6 +240,7 @@ def breakdown(
     journal = {e["step"]: e["t"] for e in evs if e["ev"] == "journal"}
     deliver = {e["step"]: e["t"] for e in evs if e["ev"] == "deliver"}
     writes = {(e["step"], e["client"]): e for e in evs if e["ev"] == "write"}
+    nan = float("nan")
     rows = []
     for out in outs:
         for tag, t_send in out["sent"].items():
@@ -242,78 +253,135 @@ def breakdown(
                 continue
             e = steps[first]
             w = writes.get((got[1], tag // 1_000_000), {})
-            row = {
-                "send": t_send,
-                "handle": handled.get(tag, float("nan")),
-                "offer": offered.get(tag, float("nan")),
-                "apply": applied[cid],
-                "t0": e["t0"],
-                "t1": e["t1"],
-                "t2": e["t2"],
-                "recv": recv[first],
-                "journal": journal.get(first, float("nan")),
-                "deliver": deliver.get(first, float("nan")),
-                "w0": w.get("t0", float("nan")),
-                "w1": w.get("t1", float("nan")),
-                "got": got[0],
-                "later_frame": float(got[1] != first),
-            }
-            rows.append(row)
-    step_times = [e["t1"] - e["t0"] for e in steps.values()]
+            rows.append(
+                {
+                    "send": t_send,
+                    "handle": handled.get(tag, nan),
+                    "offer": offered.get(tag, nan),
+                    "apply": applied[cid],
+                    "t0": e["t0"],
+                    "t1": e["t1"],
+                    "t2": e["t2"],
+                    "recv": recv[first],
+                    "journal": journal.get(first, nan),
+                    "deliver": deliver.get(first, nan),
+                    "w0": w.get("t0", nan),
+                    "w1": w.get("t1", nan),
+                    "got": got[0],
+                    "later_frame": float(got[1] != first),
+                }
+            )
     last_write: dict[int, float] = {}
     for (step, _), w in writes.items():
         last_write[step] = max(last_write.get(step, 0.0), w["t1"])
-    spread = [t - deliver[s] for s, t in last_write.items() if s in deliver]
-    return rows, step_times, spread
+    return {
+        "rows": rows,
+        "steps": [e["t1"] - e["t0"] for e in steps.values()],
+        "after": [
+            e["t1"] - e["t0"]
+            for s, e in steps.items()
+            if s - 1 in steps and e["cid"] > steps[s - 1]["cid"]
+        ],
+        "spread": [t - deliver[s] for s, t in last_write.items() if s in deliver],
+    }
 
 
-def segment_table(
-    results: list[tuple[int, list[dict[str, float]], list[float], float]],
-) -> list[str]:
-    head = "| segment | " + " | ".join(
-        f"{n} client{'s' if n > 1 else ''} p50 / p99 ms" for n, *_ in results
-    )
-    lines = [head + " |", "|---|" + "---:|" * len(results)]
+def _q(vals: list[float]) -> tuple[float, float] | None:
+    """(p50, p99) in ms."""
+    vals = sorted(1e3 * v for v in vals if v == v)
+    if len(vals) < 2:
+        return None
+    q = statistics.quantiles(vals, n=100)
+    return q[49], q[98]
+
+
+def segment_table(results: list[dict[str, Any]]) -> list[str]:
+    """Median / p99 of each segment, a column per client count."""
+
+    def cell(vals: list[float]) -> str:
+        q = _q(vals)
+        return "n/a" if q is None else f"{q[0]:.1f} / {q[1]:.1f}"
+
+    head = " | ".join(f"{r['clients']} client{'s' if r['clients'] > 1 else ''}" for r in results)
+    lines = [f"| p50 / p99 ms | {head} |", "|---|" + "---:|" * len(results)]
     for name, end, start in SEGMENTS:
-        cells = []
-        for _, rows, *_ in results:
-            vals = sorted(
-                1e3 * (r[end] - r[start]) for r in rows if r[end] == r[end] and r[start] == r[start]
-            )
-            if len(vals) < 2:
-                cells.append("n/a")
-                continue
-            q = statistics.quantiles(vals, n=100)
-            cells.append(f"{q[49]:.1f} / {q[98]:.1f}")
+        cells = [cell([r[end] - r[start] for r in res["rows"]]) for res in results]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    lines.append(
-        "| step time (every step) | "
-        + " | ".join(f"{1e3 * statistics.median(st):.1f}" for _, _, st, *_ in results)
-        + " |"
-    )
-    lines.append(
-        "| every step: handed to the clients -> written to the last one | "
-        + " | ".join(
-            f"{1e3 * statistics.median(sp):.1f} / {1e3 * max(sp):.1f} (max)" if sp else "n/a"
-            for *_, sp in results
-        )
-        + " |"
-    )
-    lines.append(
-        "| controls whose frame the client did not get (a later one showed it) | "
-        + " | ".join(
-            f"{sum(r['later_frame'] for r in rows):.0f} of {len(rows)}" for _, rows, *_ in results
-        )
-        + " |"
-    )
-    lines.append(
-        "| benchmark p99 ms (its own measure) / bound | "
-        + " | ".join(
-            f"{p99:.1f} / {2e3 * statistics.median(st) + 20:.0f}" for _, _, st, p99, _ in results
-        )
-        + " |"
-    )
+    extra = [
+        ("engine step, every step", lambda res: cell(res["steps"])),
+        ("engine step, steps right after a control", lambda res: cell(res["after"])),
+        (
+            "frame handed to the clients -> written to the last one, every step",
+            lambda res: cell(res["spread"]),
+        ),
+        (
+            "controls whose own frame the client missed (a later one showed it)",
+            lambda res: f"{sum(r['later_frame'] for r in res['rows']):.0f} of {len(res['rows'])}",
+        ),
+        (
+            "the benchmark's p99 (its own measure) / bound 2 x median step + 20",
+            lambda res: f"{res['p99_ms']:.1f} / {2e3 * statistics.median(res['steps']) + 20:.0f}",
+        ),
+    ]
+    for name, fn in extra:
+        lines.append(f"| {name} | " + " | ".join(fn(res) for res in results) + " |")
     return lines
+
+
+VARIANTS = {
+    "before": {
+        "what": "as before this change: the old client (the `websockets` library, every frame "
+        "decoded whole, 16 clients in one process), frames written in subscriber order, all "
+        "senders woken in one turn",
+        "full_decode": True,
+        "per_proc": 16,
+        "plain": True,
+    },
+    "now": {
+        "what": "now: the raw client (header only, 4 clients per process), the frame showing a "
+        "client's control written to it first, senders woken one per turn",
+        "full_decode": False,
+        "per_proc": 4,
+        "plain": False,
+    },
+}
+
+
+def run_variant(
+    name: str, grids: list[str], clients: list[int], seconds: float, dump: str | None
+) -> dict[str, list[dict[str, Any]]]:
+    """One server with the hooks; every grid and client count; the breakdown of each run."""
+    bench = svc()
+    v = VARIANTS[name]
+    bench.CLIENTS_PER_PROC, bench.FULL_DECODE = v["per_proc"], v["full_decode"]
+    out: dict[str, list[dict[str, Any]]] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        trace_dir = Path(tmp) / "trace"
+        trace_dir.mkdir()
+        env = {**os.environ, TRACE_ENV: str(trace_dir)}
+        if v["plain"]:
+            env[PLAIN_ORDER_ENV] = "1"
+        server = bench.Server(Path(tmp) / "data", script=Path(__file__), env=env)
+        try:
+            for grid in grids:
+                out[grid] = []
+                for n in clients:
+                    sid = bench.warm_session(server, [int(x) for x in grid.split("x")])
+                    a = time.monotonic()
+                    run = bench.fan_out(server, sid, n, seconds, 1000.0)
+                    b = time.monotonic()
+                    server.http.delete(f"/v1/sessions/{sid}")
+                    time.sleep(0.2)
+                    res = breakdown(load_events(trace_dir), run["outs"], a, b)
+                    res.update(clients=n, p99_ms=run["p99_ms"], p50_ms=run["p50_ms"])
+                    out[grid].append(res)
+                    print(name, grid, n, len(res["rows"]), run["p50_ms"], run["p99_ms"], flush=True)
+                    if dump:
+                        with open(dump, "a", encoding="utf-8") as f:
+                            f.write(json.dumps({"variant": name, "grid": grid, **res}) + "\n")
+        finally:
+            server.stop()
+    return out
 
 
 def main() -> None:
@@ -322,60 +390,37 @@ def main() -> None:
     c = sub.add_parser("serve-child")
     c.add_argument("--port", type=int, required=True)
     c.add_argument("--data-dir", required=True)
-    p.add_argument("--grid", default="33x33x65")
+    p.add_argument("--grids", default="17x17x33,33x33x65")
     p.add_argument("--clients", default="1,4,16")
     p.add_argument("--seconds", type=float, default=4.0)
-    p.add_argument("--full-decode", action="store_true", help="clients decode whole frames")
-    p.add_argument("--clients-per-proc", type=int, default=4)
-    p.add_argument(
-        "--plain-order", action="store_true", help="write frames in subscriber order (as before)"
-    )
-    p.add_argument("--label", default="")
+    p.add_argument("--variants", default="before,now", help=f"of {', '.join(VARIANTS)}")
+    p.add_argument("--dump", help="also append each run's timestamps (JSON lines) here")
     p.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "service_trace.md"))
     args = p.parse_args()
     if args.cmd == "serve-child":
         serve_child(args)
         return
-    bench = svc()
-    bench.CLIENTS_PER_PROC = args.clients_per_proc
-    bench.FULL_DECODE = args.full_decode
-    grid = [int(x) for x in args.grid.split("x")]
-    results = []
+    grids = args.grids.split(",")
+    clients = [int(x) for x in args.clients.split(",")]
     load = os.getloadavg()
-    with tempfile.TemporaryDirectory() as tmp:
-        trace_dir = Path(tmp) / "trace"
-        trace_dir.mkdir()
-        env = {**os.environ, TRACE_ENV: str(trace_dir)}
-        if args.plain_order:
-            env[PLAIN_ORDER_ENV] = "1"
-        server = bench.Server(Path(tmp) / "data", script=Path(__file__), env=env)
-        try:
-            for n in [int(x) for x in args.clients.split(",")]:
-                sid = bench.warm_session(server, grid)
-                a = time.monotonic()
-                run = bench.fan_out(server, sid, n, args.seconds, 1000.0)
-                b = time.monotonic()
-                server.http.delete(f"/v1/sessions/{sid}")
-                time.sleep(0.2)
-                rows, step_times, spread = breakdown(load_events(trace_dir), run["outs"], a, b)
-                results.append((n, rows, step_times, run["p99_ms"], spread))
-                print(n, len(rows), run["p50_ms"], run["p99_ms"], flush=True)
-        finally:
-            server.stop()
-    mode = "whole frames decoded" if args.full_decode else "header only decoded"
+    runs = {
+        v: run_variant(v, grids, clients, args.seconds, args.dump) for v in args.variants.split(",")
+    }
     lines = [
-        f"### {args.label or args.grid}: {mode}, up to {args.clients_per_proc} clients per "
-        f"client process",
+        "# Where a control's latency goes",
         "",
-        f"Load average {' / '.join(f'{x:.1f}' for x in (*load, *os.getloadavg()))}.",
-        "",
-        *segment_table(results),
+        f"`python benchmarks/service_trace.py {' '.join(sys.argv[1:])}`: the service benchmark's "
+        f"rows ({args.seconds} s each, one run per row) with timestamps along each control's "
+        "path, on the machine's monotonic clock (one clock for every process). Load average "
+        f"{' / '.join(f'{x:.1f}' for x in (*load, *os.getloadavg()))}.",
         "",
     ]
+    for grid in grids:
+        for v, by_grid in runs.items():
+            lines += [f"## {grid}, {VARIANTS[v]['what']}", "", *segment_table(by_grid[grid]), ""]
     text = "\n".join(lines)
     print(text)
-    with open(args.out, "a", encoding="utf-8") as f:
-        f.write(text + "\n")
+    Path(args.out).write_text(text, encoding="utf-8")
 
 
 if __name__ == "__main__":
