@@ -10,7 +10,8 @@ process, the reply sent and received by the server, journaled, handed to the cli
 to each client's socket; and the client's receive. Writes ``benchmarks/results/service_trace.md``
 (median and p99 of each segment per client count), for the service and client as they were
 before (``before``: the ``websockets`` client decoding every frame in one process, frames written
-in subscriber order, all senders woken at once) and as they are (``now``).
+in subscriber order, all senders woken at once, replies read with ``Connection.recv``) and as
+they are (``now``).
 """
 
 from __future__ import annotations
@@ -180,7 +181,21 @@ def serve_child(args: argparse.Namespace) -> None:
 
         hub.Subscriber.first_shown_by = lambda self, frame: False  # type: ignore[method-assign]
         hub.wake_in_turn = _wake_all  # type: ignore[assignment]
+        engine_process.ReplyReader = _ConnectionReader  # type: ignore[misc, assignment]
     svc().serve_child(args)
+
+
+class _ConnectionReader:
+    """The replies' reading before: ``Connection.recv``."""
+
+    def __init__(self, conn: Any) -> None:
+        self.conn = conn
+
+    def recv(self) -> Any:
+        return self.conn.recv()
+
+    def close(self) -> None:
+        pass
 
 
 def _wake_all(slots: list[Any]) -> None:
@@ -332,14 +347,15 @@ VARIANTS = {
     "before": {
         "what": "as before this change: the old client (the `websockets` library, every frame "
         "decoded whole, 16 clients in one process), frames written in subscriber order, all "
-        "senders woken in one turn",
+        "senders woken in one turn, replies read with `Connection.recv`",
         "full_decode": True,
         "per_proc": 16,
         "plain": True,
     },
     "now": {
         "what": "now: the raw client (header only, 4 clients per process), the frame showing a "
-        "client's control written to it first, senders woken one per turn",
+        "client's control written to it first, senders woken one per turn, replies read into "
+        "one reused buffer",
         "full_decode": False,
         "per_proc": 4,
         "plain": False,
