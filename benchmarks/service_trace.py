@@ -430,6 +430,17 @@ def main() -> None:
         "path, on the machine's monotonic clock (one clock for every process). Load average "
         f"{' / '.join(f'{x:.1f}' for x in (*load, *os.getloadavg()))}.",
         "",
+        "How to read it: a client sends its control right after a frame arrives, when the step "
+        "in progress has just begun. The control waits for that step (*waits for the step in "
+        "progress*: about one step less the previous frame's trip to the client), then for its "
+        "own step, then for its frame's trip (from *frame encoded* to *socket -> client*); "
+        "*applied -> its step starts* shows whether a queued step ran first (it does not: the "
+        "engine takes a control ahead of a queued step). So the p50 is about 2 steps, the "
+        "service's own share is the rows before the wait and from *frame encoded* on, and a "
+        "p99 over the bound (2 x the row's step time + 20 ms) comes from steps slower than the "
+        "row's median (*engine step*: the engine waiting for a CPU that the server, the clients "
+        "and other jobs take) or from the frame's trip.",
+        "",
     ]
     for grid in grids:
         for v, by_grid in runs.items():
