@@ -62,3 +62,9 @@ def test_a_frame_showing_the_control_clears_the_wait() -> None:
     assert sub.first_shown_by(_frame(4)) and sub.first_shown_by(_frame(9))
     assert not Subscriber(slot=sub.slot).first_shown_by(_frame(9))  # no control: no priority
     sub.slot.loop.close()
+
+
+def test_the_clients_a_frame_first_shows_a_control_of_are_written_together_first() -> None:
+    order = _run_senders([3, 0, 2, 0], control_id=3)
+    assert order[:2] == ["s0", "s2"]  # both woken in one turn, before anything else runs
+    assert order.index("after-0") < order.index("s1") < order.index("after-1") < order.index("s3")

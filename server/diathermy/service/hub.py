@@ -210,21 +210,26 @@ class StreamHub:
         with self._lock:
             targets = [s for s in self._subscribers if s.subscription in frames]
         targets.sort(key=lambda s: not s.first_shown_by(frames[s.subscription]))
+        first = sum(s.first_shown_by(frames[s.subscription]) for s in targets)
         drops = sum(s.slot.put(frames[s.subscription], notify=False) for s in targets)
         if targets:  # one wake-up of the event loop for all of them, not one per client
-            targets[0].slot.loop.call_soon_threadsafe(wake_in_turn, [s.slot for s in targets])
+            slots = [s.slot for s in targets]
+            targets[0].slot.loop.call_soon_threadsafe(wake_in_turn, slots, max(1, first))
         return drops
 
 
-def wake_in_turn(slots: list[FrameSlot]) -> None:
-    """Wake the senders of ``slots`` one per turn of the event loop (event-loop thread).
+def wake_in_turn(slots: list[FrameSlot], now: int = 1) -> None:
+    """Wake the senders of the first ``now`` slots, then the others one per turn of the event
+    loop (event-loop thread).
 
     Each sender writes its frame (1.2 MB on the default grid) in the turn after it is woken,
     and the loop polls the sockets between turns: a control message that arrives while a step's
-    frame goes out to 16 clients is read after one client's write, not after all of them."""
-    slots[0].wake()
-    if len(slots) > 1:
-        slots[0].loop.call_soon(wake_in_turn, slots[1:])
+    frame goes out to 16 clients is read after one client's write, not after all of them. The
+    clients the frame first shows a control of (``now``) are written together, first."""
+    for slot in slots[:now]:
+        slot.wake()
+    if len(slots) > now:
+        slots[0].loop.call_soon(wake_in_turn, slots[now:])
 
 
 def frame_header(sim: Any, *, session_id: str, control_id: int) -> dict[str, Any]:
