@@ -16,7 +16,9 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import multiprocessing
 import os
+import resource
 import socket
 import statistics
 import subprocess
@@ -31,6 +33,7 @@ sys.path[:0] = [str(ROOT / "server"), str(ROOT)]
 import httpx  # noqa: E402
 from websockets.asyncio.client import connect  # noqa: E402
 
+from benchmarks.service_client import RawStream  # noqa: E402
 from diathermy.service.encoding import unpack  # noqa: E402
 
 TOKEN = "bench-token"
@@ -40,6 +43,8 @@ QUICK_CUT = {
     "electrodes": [{"position_m": [0.01, 0.005], "power_w": 200.0}],
 }
 FIELDS = ["temperature", "displacement"]
+CLIENTS_PER_PROC = 4
+FULL_DECODE = False  # service_trace.py --full-decode: the old client
 STEADY = {"name": "default-electrothermal", "effects": ["electric", "thermal"]}
 """The built-in default scene (50 W) without vaporization and mechanics: a steady step cost, so
 that rows compare like with like (with them, steps slow ~100x once the tissue boils)."""
@@ -92,20 +97,23 @@ def free_port() -> int:
 
 
 class Server:
-    def __init__(self, data_dir: Path) -> None:
+    def __init__(
+        self, data_dir: Path, script: Path | None = None, env: dict[str, str] | None = None
+    ) -> None:
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         self.ws = f"ws://127.0.0.1:{self.port}"
         self.proc = subprocess.Popen(
             [
                 sys.executable,
-                __file__,
+                str(script or __file__),
                 "serve-child",
                 "--port",
                 str(self.port),
                 "--data-dir",
                 str(data_dir),
             ],
+            env=env,
         )
         self.wait_ready(timeout_s=60.0)
         self.http = httpx.Client(
@@ -151,56 +159,143 @@ class Server:
             self.proc.wait()
 
 
+def control_latencies(
+    sent: dict[int, float], acked: dict[int, int], frames: list[tuple[float, int, int]]
+) -> list[tuple[float, int]]:
+    """(seconds, step) from sending each control to the first frame received after it whose
+    ``control_id`` is at least the control's (ids grow in the order the engine applies them,
+    so that frame is the first to show it applied), and that frame's step. ``sent``: tag ->
+    send time; ``acked``: tag -> control id; ``frames``: (receive time, control_id, step) in
+    order."""
+    out = []
+    for tag, t_sent in sent.items():
+        cid = acked.get(tag)
+        if cid is None:
+            continue
+        got = next(((t, s) for t, c, s in frames if t > t_sent and c >= cid), None)
+        if got is not None:
+            out.append((got[0] - t_sent, got[1]))
+    return out
+
+
+class FullClient:
+    """The old client (``service_trace.py --full-decode``): the ``websockets`` library, every
+    message decoded whole."""
+
+    def __init__(self, ws: Any) -> None:
+        self.ws = ws
+
+    @classmethod
+    async def open(cls, url: str) -> FullClient:
+        headers = {"Authorization": f"Bearer {TOKEN}"}
+        return cls(await connect(url, additional_headers=headers, max_size=None))
+
+    async def recv(self, timeout_s: float) -> tuple[float, dict[str, Any]]:
+        raw = await asyncio.wait_for(self.ws.recv(), timeout=timeout_s)
+        t = time.monotonic()
+        return t, dict(unpack(raw))
+
+    def send_text(self, text: str) -> None:
+        asyncio.ensure_future(self.ws.send(text))
+
+    def close(self) -> None:
+        asyncio.ensure_future(self.ws.close())
+
+
+async def open_client(url: str) -> Any:
+    if FULL_DECODE:
+        return await FullClient.open(url)
+    host_port, path = url.removeprefix("ws://").split("/", 1)
+    host, port = host_port.split(":")
+    return await RawStream.open(host, int(port), "/" + path, TOKEN)
+
+
 async def stream_client(
-    url: str, *, rate_hz: float | None, seconds: float, out: dict[str, Any]
+    url: str,
+    *,
+    index: int,
+    rate_hz: float | None,
+    t_start: float,
+    seconds: float,
+    out: dict[str, Any],
 ) -> None:
-    """Subscribe, (if ``rate_hz``) start the run, send electrode controls, time their frames."""
-    async with connect(
-        url, additional_headers={"Authorization": f"Bearer {TOKEN}"}, max_size=None
-    ) as ws:
-        await ws.recv()  # hello
-        await ws.send(json.dumps({"type": "subscribe", "fields": FIELDS}))
+    """Subscribe, (if ``rate_hz``) start the run, send an electrode control every 0.25 s from
+    ``t_start`` (monotonic clock) for ``seconds``, and time the frames that show them applied."""
+    ws = await open_client(url)
+    try:
+        await ws.recv(30.0)  # hello
+        ws.send_text(json.dumps({"type": "subscribe", "fields": FIELDS}))
         if rate_hz is not None:
-            await ws.send(json.dumps({"type": "run", "rate_hz": rate_hz}))
-        frames: list[tuple[float, int]] = []
-        latencies: list[float] = []
-        pending: dict[int, float] = {}  # tag -> send time
-        waiting: list[tuple[int, float]] = []  # (control_id, send time)
-        tag = 0
-        t_start = time.monotonic() + 0.5  # warm-up before counting
+            ws.send_text(json.dumps({"type": "run", "rate_hz": rate_hz}))
+        frames: list[tuple[float, int, int]] = []  # (receive time, control_id, step) of each
+        counted: list[tuple[float, int]] = []  # (receive time, step) from t_start
+        sent: dict[int, float] = {}  # tag -> send time
+        acked: dict[int, int] = {}  # tag -> control id
+        walls: dict[int, float] = {}  # step -> the engine's wall time for it (frame report)
+        tag = index * 1_000_000  # unique across clients (the trace joins on it)
         t_end = t_start + seconds
         next_control = t_start
         dropped = 0
-        while time.monotonic() < t_end:
+        while True:
             now = time.monotonic()
+            if now >= t_end:
+                break
             if now >= next_control:
                 tag += 1
-                pending[tag] = now
+                sent[tag] = now
                 power = 50.0 if tag % 2 else 49.0
-                await ws.send(json.dumps({"type": "electrode", "power_w": power, "tag": tag}))
+                ws.send_text(json.dumps({"type": "electrode", "power_w": power, "tag": tag}))
                 next_control = now + 0.25
             try:
-                msg = unpack(await asyncio.wait_for(ws.recv(), timeout=0.05))
+                t, msg = await ws.recv(0.05)  # so a control goes out just after a frame
             except TimeoutError:
                 continue
-            t = time.monotonic()
-            if msg["type"] == "ack" and msg.get("tag") in pending:
-                waiting.append((msg["control_id"], pending.pop(msg["tag"])))
+            if msg["type"] == "ack" and msg.get("tag") in sent:
+                acked[msg["tag"]] = msg["control_id"]
             elif msg["type"] == "frame":
+                frames.append((t, msg["control_id"], msg["step"]))
+                if msg.get("report"):
+                    walls[msg["step"]] = float(msg["report"]["wall_s"])
                 if t >= t_start:
-                    frames.append((t, msg["step"]))
+                    counted.append((t, msg["step"]))
                     dropped = msg["dropped"]
-                done = [w for w in waiting if msg["control_id"] >= w[0]]
-                for w in done:
-                    latencies.append(t - w[1])
-                    waiting.remove(w)
         if rate_hz is not None:
-            await ws.send(json.dumps({"type": "pause"}))
-        span = frames[-1][0] - frames[0][0] if len(frames) > 1 else float("nan")
-        out["fps"] = (len(frames) - 1) / span
-        out["steps_per_s"] = (frames[-1][1] - frames[0][1]) / span
-        out["latencies"] = latencies
-        out["dropped"] = dropped
+            ws.send_text(json.dumps({"type": "pause"}))
+            await asyncio.sleep(0.05)
+    finally:
+        ws.close()
+    span = counted[-1][0] - counted[0][0] if len(counted) > 1 else float("nan")
+    out["fps"] = (len(counted) - 1) / span
+    out["steps_per_s"] = (counted[-1][1] - counted[0][1]) / span
+    out["latencies"] = control_latencies(sent, acked, frames)
+    out["dropped"] = dropped
+    out["sent"], out["acked"], out["frames"], out["walls"] = sent, acked, frames, walls
+
+
+def client_process(
+    url: str, indices: list[int], rate_hz: float, t_start: float, seconds: float, conn: Any
+) -> None:
+    """One client process: the stream clients ``indices`` (client 0 starts the run)."""
+    outs: list[dict[str, Any]] = [{} for _ in indices]
+
+    async def clients() -> None:
+        await asyncio.gather(
+            *[
+                stream_client(
+                    url,
+                    index=i,
+                    rate_hz=rate_hz if i == 0 else None,
+                    t_start=t_start,
+                    seconds=seconds,
+                    out=o,
+                )
+                for i, o in zip(indices, outs, strict=True)
+            ]
+        )
+
+    asyncio.run(clients())
+    conn.send(outs)
+    conn.close()
 
 
 def warm_session(server: Server, grid: list[int]) -> str:
@@ -228,6 +323,12 @@ def cpu_s(pid: int) -> float:
     """CPU seconds (user + system, all threads) a process has used."""
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def children_cpu_s() -> float:
+    """CPU seconds of the benchmark's client processes that have ended (forked and joined)."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
 
 
 def descendants(pid: int) -> list[int]:
@@ -279,23 +380,25 @@ def grid_rows(
                 alone_wait.append((run_queue_s(server.proc.pid) - q0) / (time.monotonic() - t0))
             else:
                 q0 = run_queue_s(server.proc.pid)
-                c0, t0 = cpu_s(os.getpid()), time.monotonic()
+                c0, t0 = children_cpu_s(), time.monotonic()
                 s0, e0 = tree_cpu_s(server.proc.pid)
-                runs[n].append(asyncio.run(fan_out(server, sid, n, seconds, 1000.0)))
+                runs[n].append(fan_out(server, sid, n, seconds, 1000.0))
+                runs[n][-1].pop("outs")
                 wall = time.monotonic() - t0
                 s1, e1 = tree_cpu_s(server.proc.pid)
                 runs[n][-1]["engine_wait"] = (run_queue_s(server.proc.pid) - q0) / wall
                 runs[n][-1]["server_cpu"] = (s1 - s0) / wall
                 engine = sum(t - e0.get(p, 0.0) for p, t in e1.items())
                 runs[n][-1]["engine_cpu"] = engine / wall
-                runs[n][-1]["client_cpu"] = (cpu_s(os.getpid()) - c0) / wall
+                runs[n][-1]["client_cpu"] = (children_cpu_s() - c0) / wall
                 runs[n][-1]["vs_alone"] = runs[n][-1]["steps_per_s"] / alone[-1]
             print(n, alone[-1] if n == 0 else runs[n][-1], flush=True)
             server.http.delete(f"/v1/sessions/{sid}")
     rows = []
     for n in clients:
         row: dict[str, Any] = {"clients": n, "reps": reps}
-        keys = ("steps_per_s", "fps_per_client", "p50_ms", "p99_ms", "vs_alone")
+        keys = ("steps_per_s", "fps_per_client", "p50_ms", "p99_ms", "vs_alone", "step_p50_ms")
+        keys += ("step_p99_ms", "step_max_ms", "beyond_p99_ms")
         for key in (*keys, "server_cpu", "engine_cpu", "client_cpu", "engine_wait"):
             row[key] = statistics.median(r[key] for r in runs[n])
         row["samples"] = sum(r["samples"] for r in runs[n])
@@ -306,22 +409,45 @@ def grid_rows(
     return statistics.median(alone), rows
 
 
-async def fan_out(
-    server: Server, sid: str, n: int, seconds: float, rate_hz: float
-) -> dict[str, Any]:
+def fan_out(server: Server, sid: str, n: int, seconds: float, rate_hz: float) -> dict[str, Any]:
+    """``n`` clients in ``client_procs(n)`` forked processes (so that one Python process
+    decoding every stream is not what the latency measures); their results and CPU seconds."""
     url = f"{server.ws}/v1/sessions/{sid}/stream"
-    outs: list[dict[str, Any]] = [{} for _ in range(n)]
-    await asyncio.gather(
-        *[
-            stream_client(url, rate_hz=rate_hz if i == 0 else None, seconds=seconds, out=o)
-            for i, o in enumerate(outs)
-        ]
-    )
-    lat = sorted(x for o in outs for x in o["latencies"])
+    procs = client_procs(n)
+    ctx = multiprocessing.get_context("fork")
+    t_start = time.monotonic() + 1.0 + 0.05 * n  # all connected and subscribed by then
+    running = []
+    for p in range(procs):
+        ours, theirs = ctx.Pipe(duplex=False)
+        indices = list(range(p, n, procs))
+        proc = ctx.Process(
+            target=client_process, args=(url, indices, rate_hz, t_start, seconds, theirs)
+        )
+        proc.start()
+        theirs.close()
+        running.append((proc, ours))
+    outs: list[dict[str, Any]] = []
+    for proc, ours in running:
+        outs += ours.recv()
+        proc.join()
+        if proc.exitcode:
+            raise RuntimeError(f"a benchmark client process exited with code {proc.exitcode}")
+    lat = sorted(x for o in outs for x, _ in o["latencies"])
     q = statistics.quantiles(lat, n=100) if len(lat) >= 2 else [float("nan")] * 99
+    by_step = {k: v for o in outs for k, v in o["walls"].items()}
+    walls = sorted(by_step.values())
+    qw = statistics.quantiles(walls, n=100) if len(walls) >= 2 else [float("nan")] * 99
+    beyond = [  # beyond the engine's own time for the frame's step and the one before it
+        x - by_step[s] - by_step[s - 1]
+        for o in outs
+        for x, s in o["latencies"]
+        if s in by_step and s - 1 in by_step
+    ]
+    qb = statistics.quantiles(beyond, n=100) if len(beyond) >= 2 else [float("nan")] * 99
     steps_per_s = statistics.median(o["steps_per_s"] for o in outs)
     return {
         "clients": n,
+        "procs": procs,
         "rate_hz": rate_hz,
         "steps_per_s": steps_per_s,
         "fps_per_client": statistics.median(o["fps"] for o in outs),
@@ -330,7 +456,17 @@ async def fan_out(
         "p99_ms": 1e3 * q[98],
         "samples": len(lat),
         "dropped": sum(o["dropped"] for o in outs),
+        "step_p50_ms": 1e3 * qw[49],
+        "step_p99_ms": 1e3 * qw[98],
+        "step_max_ms": 1e3 * walls[-1] if walls else float("nan"),
+        "beyond_p99_ms": 1e3 * qb[98],
+        "outs": outs,
     }
+
+
+def client_procs(n: int) -> int:
+    """Client processes for ``n`` clients: up to 4 clients each."""
+    return max(1, -(-n // CLIENTS_PER_PROC))
 
 
 async def frame_sizes(server: Server, sid: str) -> list[dict[str, Any]]:
@@ -400,8 +536,9 @@ def fan_table(grid: str, alone: float, fan: list[dict[str, Any]]) -> list[str]:
         "",
         "| clients | steps/s | vs alone | frames/s per client | per client / steps/s | "
         "latency p50 ms | latency p99 ms | p99 bound ms | samples | frames dropped | "
+        "engine step ms p50 / p99 / max | p99 beyond its two steps ms | "
         "CPU server / engine / clients | engine waits for a CPU | targets |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
     for r in fan:
         bound = r["p99_bound_ms"]
@@ -422,7 +559,9 @@ def fan_table(grid: str, alone: float, fan: list[dict[str, Any]]) -> list[str]:
             f"| {r['clients']} | {r['steps_per_s']:.1f} | {r['vs_alone']:.2f} | "
             f"{r['fps_per_client']:.1f} | {r['fps_per_client'] / r['steps_per_s']:.2f} | "
             f"{r['p50_ms']:.1f} | {r['p99_ms']:.1f} | {bound:.0f} | {r['samples']} | "
-            f"{r['dropped']} | {r['server_cpu']:.2f} / {r['engine_cpu']:.2f} / "
+            f"{r['dropped']} | {r['step_p50_ms']:.0f} / {r['step_p99_ms']:.0f} / "
+            f"{r['step_max_ms']:.0f} | {r['beyond_p99_ms']:.1f} | "
+            f"{r['server_cpu']:.2f} / {r['engine_cpu']:.2f} / "
             f"{r['client_cpu']:.2f} | {100 * r['engine_wait']:.0f} % | {verdict} |"
         )
     return lines + [""]
@@ -452,14 +591,24 @@ def write_report(
         "row is the median of the repetitions; the configurations run interleaved (alone, 1, 4, "
         "16, alone, ...) on fresh sessions, and *vs alone* is the median of each run's ratio to "
         "the alone run just before it, so that the shared machine's drifting load cancels. "
+        "Clients: up to 4 per forked client process (`service_client.py`), each a WebSocket "
+        "client that reads every byte of every frame off its socket into one buffer and keeps "
+        "only the message's header (step, `control_id`, report, `dropped`; the arrays come "
+        "last and are skipped unread), so that the latency is the service's and not that of "
+        "a Python client decoding 16 x 1.2 MB per step in one process (the client before this "
+        "one, `service_trace.py` replays it). "
         "CPU: cores used during the row by the server process, by its engine processes and by "
-        "the benchmark's client process (the clients decode every frame in Python and share the "
-        "cores with the server). Latency: from sending an "
-        "electrode control message to the first frame whose `control_id` shows it applied; "
-        "every client sends one every 0.25 s. Frames dropped: coalesced for clients that fell "
-        "behind (summed). Targets: frames/s per client >= 0.9 x steps/s, steps/s with 16 "
-        "clients >= 0.9 x alone, p99 <= 2 step times + 20 ms (a control waits for the step in "
-        "progress, then its own step).",
+        "the benchmark's client processes (which share the 2 cores with them). Latency: from "
+        "sending an electrode control message to the first frame whose `control_id` shows it "
+        "applied (the ack gives the control's id; the frame may come before the ack); every "
+        "client sends one every 0.25 s, right after a frame arrives, which is the worst phase: "
+        "the step in progress has just begun. Frames dropped: coalesced for clients that fell "
+        "behind (summed). Engine step: the engine's own wall time per step (the frames' "
+        "reports); *p99 beyond its two steps*: each control's latency less the wall times of the "
+        "step that showed it and the step before (the one it waited for), i.e. what the service "
+        "adds. Targets: frames/s per client >= 0.9 x steps/s, steps/s with 16 "
+        "clients >= 0.9 x alone, p99 <= 2 step times + 20 ms, step time = 1 / steps/s of the "
+        "row (a control waits for the step in progress, then its own step).",
         "",
         "Scene: the built-in `default` (50 W) with only its electric and thermal effects, on "
         "17x17x33 and on its own 33x33x65 grid: a steady cost per step, so that rows compare "
@@ -485,17 +634,21 @@ def write_report(
         "than the step). So the sockets' writes no longer take GIL time from the engine, and "
         "with BLAS on one thread (`DIATHERMY_BLAS_THREADS`, default 1, as `diathermy serve` "
         "sets) the engine takes one core and leaves the other to the event loop, the kernel's "
-        "copies and the clients.",
+        "copies and the clients. The frame of a step is written first to the clients whose last "
+        "electrode control it is the first to show (`hub.py`), and the senders are woken one "
+        "per turn of the event loop, so that a control that arrives while a frame goes out to "
+        "16 clients is read after one write, not sixteen.",
         "",
         "CPU column: *server* is the server process (event loop, HTTP, journal), *engine* its "
-        "engine processes, *clients* the benchmark's client process. Every step moves 16 x the "
-        "frame over loopback (150 kB on 17x17x33, 1.2 MB on 33x33x65), which the clients decode "
-        "in Python: on 2 cores shared with other jobs the clients fall behind first (frames "
-        "dropped, latency queued in the sockets). *Engine waits for a CPU*: the share of the "
+        "engine processes, *clients* the benchmark's client processes. Every step moves 16 x the "
+        "frame over loopback (150 kB on 17x17x33, 1.2 MB on 33x33x65): the server's writes and "
+        "the kernel's copies share the 2 cores with the engine. *Engine waits for a CPU*: the "
+        "share of the "
         "row's wall time the engine process was runnable but not running (its run-queue delay, "
         "`/proc/<pid>/schedstat`): time the other jobs, the server and the clients took from "
         "it, which no change in the service's protocol wins back.",
         "",
+        *trace_section(),
         "## Bytes per frame",
         "",
         "A 2 x 1 x 1 cm block under 200 W, stepped until it cuts.",
@@ -529,6 +682,15 @@ def write_report(
         "",
     ]
     path.write_text("\n".join(lines), encoding="utf-8")
+
+
+def trace_section() -> list[str]:
+    """The latency breakdown of ``service_trace.py`` (its last results), headings demoted."""
+    path = ROOT / "benchmarks" / "results" / "service_trace.md"
+    if not path.exists():
+        return []
+    text = path.read_text(encoding="utf-8").strip().splitlines()
+    return [("#" + ln if ln.startswith("#") else ln) for ln in text] + [""]
 
 
 def main() -> None:

@@ -67,12 +67,14 @@ class Frame:
     step: int
     n: int
     body: bytes
+    control_id: int = 0  # the electrode controls the frame shows applied
     _last: list[tuple[int, bytes]] = field(default_factory=list, compare=False, repr=False)
 
     @classmethod
     def encode(cls, message: dict[str, Any]) -> Frame:
         body = b"".join(pack(k) + pack(v) for k, v in message.items())
-        return cls(step=int(message["step"]), n=len(message), body=body)
+        control_id = int(message.get("control_id") or 0)
+        return cls(step=int(message["step"]), n=len(message), body=body, control_id=control_id)
 
     def to_bytes(self, dropped: int) -> bytes:
         """The whole msgpack map: the shared pairs plus this client's ``dropped``.
@@ -103,7 +105,7 @@ class FrameSlot:
     def put(self, frame: Frame, *, notify: bool = True) -> bool:
         """Store ``frame``; returns True when it replaced an untaken one (a drop).
 
-        ``notify=False`` leaves waking the sender to the caller (``wake_all``)."""
+        ``notify=False`` leaves waking the sender to the caller (``wake_in_turn``)."""
         with self._lock:
             replaced = self._frame is not None
             self._frame = frame
@@ -138,6 +140,11 @@ class Subscriber:
 
     slot: FrameSlot
     subscription: Subscription = field(default_factory=Subscription)
+    awaiting: int = 0  # id of this client's last electrode control until a frame shows it
+
+    def first_shown_by(self, frame: Frame) -> bool:
+        """Whether ``frame`` is the first this client gets that shows its last control."""
+        return 0 < self.awaiting <= frame.control_id
 
 
 def build_payload(sim: Any, sub: Subscription) -> dict[str, Any]:
@@ -193,21 +200,36 @@ class StreamHub:
             return tuple(dict.fromkeys(s.subscription for s in self._subscribers))
 
     def deliver(self, frames: dict[Subscription, Frame]) -> int:
-        """Offer each subscriber its subscription's frame of this step; returns the drops."""
+        """Offer each subscriber its subscription's frame of this step; returns the drops.
+
+        The senders are woken (so the frame is written) first for the clients whose last
+        electrode control the frame is the first to show: the client steering the electrode
+        sees its effect without waiting for the frame's copies to every other client."""
         if not frames:
             return 0
         with self._lock:
             targets = [s for s in self._subscribers if s.subscription in frames]
+        targets.sort(key=lambda s: not s.first_shown_by(frames[s.subscription]))
+        first = sum(s.first_shown_by(frames[s.subscription]) for s in targets)
         drops = sum(s.slot.put(frames[s.subscription], notify=False) for s in targets)
         if targets:  # one wake-up of the event loop for all of them, not one per client
-            targets[0].slot.loop.call_soon_threadsafe(wake_all, [s.slot for s in targets])
+            slots = [s.slot for s in targets]
+            targets[0].slot.loop.call_soon_threadsafe(wake_in_turn, slots, max(1, first))
         return drops
 
 
-def wake_all(slots: list[FrameSlot]) -> None:
-    """Wake the senders of ``slots`` (event-loop thread)."""
-    for slot in slots:
+def wake_in_turn(slots: list[FrameSlot], now: int = 1) -> None:
+    """Wake the senders of the first ``now`` slots, then the others one per turn of the event
+    loop (event-loop thread).
+
+    Each sender writes its frame (1.2 MB on the default grid) in the turn after it is woken,
+    and the loop polls the sockets between turns: a control message that arrives while a step's
+    frame goes out to 16 clients is read after one client's write, not after all of them. The
+    clients the frame first shows a control of (``now``) are written together, first."""
+    for slot in slots[:now]:
         slot.wake()
+    if len(slots) > now:
+        slots[0].loop.call_soon(wake_in_turn, slots[now:])
 
 
 def frame_header(sim: Any, *, session_id: str, control_id: int) -> dict[str, Any]:

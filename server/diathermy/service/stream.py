@@ -116,6 +116,8 @@ class StreamConnection:
             if frame is not None:
                 await self.ws.send_bytes(frame.to_bytes(self.sub.slot.dropped))
                 self.state.metrics.frames_sent.inc()
+                if self.sub.first_shown_by(frame):
+                    self.sub.awaiting = 0
 
     async def serve(self) -> None:
         driver = driver_of(self.rec, self.state)
@@ -216,6 +218,7 @@ class StreamConnection:
             control_id, step = await update_electrode(
                 registry=self.state.registry, rec=self.rec, name=msg.name, update=update
             )
+            self.sub.awaiting = control_id  # its frame goes to this client first (hub.deliver)
             await self._ack("electrode", driver, msg.tag, step, control_id)
         elif isinstance(msg, Run):
             driver.run(msg.rate_hz)
