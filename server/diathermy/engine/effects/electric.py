@@ -6,6 +6,8 @@ potential and joule_heat, or hands the solve to the thermal effect (monolithic c
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from diathermy.engine.contact import combined, contact_key, drives_current
@@ -95,36 +97,28 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
             "conductivity and contact unchanged: potential reused (scaled to the drive)",
             extra={"current_a": sol.current_a},
         )
-    elif sol.stats.energy_estimate is not None:
-        tol = ctx.scene.solver.electric_energy_tolerance
-        report = EffectReport(
-            True,
-            iterations=sol.stats.iterations,
-            extra={
-                "current_a": sol.current_a,
-                "residual": sol.stats.residual,
-                "reassembled": sol.stats.reassembled,
-                "setup_s": 0.0,
-                "energy_estimate": sol.stats.energy_estimate,
-                "energy_tolerance": tol,
-                "mode": "local",
-                "why": f"{sol.stats.iterations} CG iterations from the last potential with the "
-                f"kept hierarchy: energy-error estimate {sol.stats.energy_estimate:.1e} <= "
-                f"{tol:.0e}",
-            },
-        )
     else:
-        report = EffectReport(
-            True,
-            iterations=sol.stats.iterations,
-            extra={
-                "current_a": sol.current_a,
-                "residual": sol.stats.residual,
-                "reassembled": sol.stats.reassembled,
-                "setup_s": sol.stats.setup_s,
-                "mode": "full",
-                "why": "conductivity or contact changed: CG over the block from the last "
-                f"potential, AMG {'rebuilt' if sol.stats.setup_s > 0 else 'kept'}",
-            },
-        )
+        st = sol.stats
+        extra: dict[str, Any] = {
+            "current_a": sol.current_a,
+            "residual": st.residual,
+            "reassembled": st.reassembled,
+            "setup_s": st.setup_s,
+        }
+        if st.energy_estimate is not None:
+            tol = ctx.scene.solver.electric_energy_tolerance
+            extra.update(
+                energy_estimate=st.energy_estimate,
+                energy_tolerance=tol,
+                mode="local",
+                why=f"{st.iterations} CG iterations from the last potential with the kept "
+                f"hierarchy: energy-error estimate {st.energy_estimate:.1e} <= {tol:.0e}",
+            )
+        else:
+            extra.update(
+                mode="full",
+                why="conductivity or contact changed: CG over the block from the last "
+                f"potential, AMG {'rebuilt' if st.setup_s > 0 else 'kept'}",
+            )
+        report = EffectReport(True, iterations=st.iterations, extra=extra)
     return Outcome(report, fields=fields, memory={"contacts": keys}, handoff=handoff)
