@@ -51,7 +51,7 @@ from diathermy.physics.contact_resistance import (  # noqa: E402
     equipotential_disk_resistance,
     uniform_flux_disk_resistance,
 )
-from diathermy.physics.levelset import tet_to_node  # noqa: E402
+from diathermy.physics.dissection import cut_driver  # noqa: E402
 from diathermy.physics.topology import contact_height  # noqa: E402
 from diathermy.scene import Scene, builtin_scene  # noqa: E402
 
@@ -67,9 +67,12 @@ UNIFORM = (33, 33, 65)
 DT_S = 0.03
 
 
-def scene_for(fine_mm: float | None, *, moving: bool, dt_s: float = DT_S) -> Scene:
+def scene_for(
+    fine_mm: float | None, *, moving: bool, dt_s: float = DT_S, length_mm: float | None = None
+) -> Scene:
     """The fixed electrode (current-density drive) with its resolution at ``fine_mm`` (0: uniform
-    33x33x65), or the moving electrode as shipped (``fine_mm`` None: its own grid)."""
+    33x33x65), or the moving electrode as shipped (``fine_mm`` None: its own grid); the cut
+    driver's non-local length at ``length_mm`` (None: the scene's)."""
     scene = builtin_scene("moving-electrode" if moving else "fixed-electrode")
     if fine_mm is not None and fine_mm <= 0:
         scene = scene.on_uniform_grid(UNIFORM)
@@ -79,23 +82,33 @@ def scene_for(fine_mm: float | None, *, moving: bool, dt_s: float = DT_S) -> Sce
     if fine_mm is not None and fine_mm > 0:
         base["resolution"] = {**base["resolution"], "fine_m": fine_mm * 1e-3}
     base["dt_s"] = dt_s
+    if length_mm is not None:
+        base["level_set"] = {**base["level_set"], "nonlocal_length_m": length_mm * 1e-3}
     return Scene.model_validate(base)
 
 
-def tag_of(fine_mm: float | None, moving: bool, dt_s: float = DT_S) -> str:
+def tag_of(fine_mm: float | None, moving: bool, dt_s: float = DT_S, length_mm: float = 0.0) -> str:
+    """The run's file tag: scene, grid, dt if not the default, the non-local length if any."""
     kind = "moving" if moving else "fixed"
     grid = "default" if fine_mm is None else "uniform" if fine_mm <= 0 else f"{fine_mm:g}mm"
-    return f"{kind}_{grid}" + ("" if dt_s == DT_S else f"_dt{dt_s:g}")
+    tag = f"{kind}_{grid}" + ("" if dt_s == DT_S else f"_dt{dt_s:g}")
+    return tag + (f"_l{length_mm:g}" if length_mm > 0 else "")
 
 
 def front_strain_energy(sim: Simulation) -> float:
-    """The largest nodal strain energy (J/m^3) on the front (phi <= 0 nodes): what starts a cut."""
+    """The largest nodal strain energy (J/m^3) driving the front (``cut_driver``, the scene's
+    non-local length) on its nodes (phi <= 0): what starts a cut."""
     W = sim.state["strain_energy"]
     if not W.any():
         return 0.0
-    n = sim.disc.n_nodes
-    W_nodes = tet_to_node(
-        W, sim.disc.mesh.tets, sim.disc.geom.volumes, n, include=~sim.state["removed"]
+    W_nodes = cut_driver(
+        W,
+        sim.state["removed"],
+        mesh=sim.disc.mesh,
+        grid=sim.grid,
+        volumes=sim.disc.geom.volumes,
+        incidence=sim.ctx.incidence,
+        length_m=sim.scene.level_set.nonlocal_length_m,
     )
     front = sim.state["level_set"] <= 0.0
     return float(W_nodes[front].max()) if front.any() else 0.0
@@ -109,9 +122,16 @@ def crater_profile(sim: Simulation, centre: tuple[float, float]) -> np.ndarray:
 
 
 def run(
-    fine_mm: float | None, *, moving: bool, seconds: float, wall_limit: float, dt_s: float = DT_S
+    fine_mm: float | None,
+    *,
+    moving: bool,
+    seconds: float,
+    wall_limit: float,
+    dt_s: float = DT_S,
+    length_mm: float | None = None,
 ) -> Path:
-    scene = scene_for(fine_mm, moving=moving, dt_s=dt_s)
+    scene = scene_for(fine_mm, moving=moving, dt_s=dt_s, length_mm=length_mm)
+    length_mm = scene.level_set.nonlocal_length_m * 1e3
     t0 = time.perf_counter()
     sim = Simulation(scene)
     build_s = time.perf_counter() - t0
@@ -156,7 +176,7 @@ def run(
             break
     if not moving:
         profiles["profile_end"] = crater_profile(sim, centre)
-    out = RESULTS / f"convergence_{tag_of(fine_mm, moving, dt_s)}.npz"
+    out = RESULTS / f"convergence_{tag_of(fine_mm, moving, dt_s, length_mm)}.npz"
     res = scene.resolution
     np.savez(
         out,
@@ -172,6 +192,7 @@ def run(
         build_s=build_s,
         max_rss_mib=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
         target_s=seconds,
+        length_mm=length_mm,
     )
     print(f"{out.name}: {len(rec['time_s'])} steps to t = {rec['time_s'][-1]:.2f} s")
     return out
@@ -557,6 +578,9 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--seconds", type=float, default=3.0)
     r.add_argument("--dt", type=float, default=DT_S, help="time step s (default 0.03)")
     r.add_argument("--wall-limit", type=float, default=3600.0)
+    r.add_argument(
+        "--length-mm", type=float, help="non-local length of the cut driver (default: the scene's)"
+    )
     pw = sub.add_parser("power")
     pw.add_argument("--fine-mm", type=float, nargs="+", required=True)
     mj = sub.add_parser("main-job")
@@ -567,7 +591,14 @@ def main(argv: list[str] | None = None) -> int:
         if a.fine_mm is None and not a.moving:
             ap.error("run: --fine-mm is required for the fixed electrode")
         fine = None if a.moving else a.fine_mm
-        run(fine, moving=a.moving, seconds=a.seconds, wall_limit=a.wall_limit, dt_s=a.dt)
+        run(
+            fine,
+            moving=a.moving,
+            seconds=a.seconds,
+            wall_limit=a.wall_limit,
+            dt_s=a.dt,
+            length_mm=a.length_mm,
+        )
     elif a.cmd == "power":
         power(a.fine_mm)
     elif a.cmd == "main-job":

@@ -21,6 +21,7 @@ from diathermy.physics.levelset import (
     tet_to_node,
 )
 from diathermy.physics.levelset_law import LevelSetLaw
+from diathermy.physics.nonlocal_average import axis_kernels, nonlocal_mean
 from diathermy.physics.topology import Topology, evaluate_topology
 
 
@@ -44,6 +45,35 @@ def cut_moves(strain_energy: np.ndarray, kappa_j_per_m3: float) -> bool:
     return bool(strain_energy.max() > kappa_j_per_m3)
 
 
+def cut_driver(
+    strain_energy: np.ndarray,
+    removed: np.ndarray,
+    *,
+    mesh: TetMesh,
+    grid: Grid,
+    volumes: np.ndarray,
+    incidence: sp.csr_matrix | None,
+    length_m: float,
+) -> np.ndarray:
+    """The nodal strain energy (n_nodes,) in J/m^3 that drives the front: the volume-weighted
+    mean over the healthy tets around each node, averaged over the material length ``length_m``
+    (m) when it is positive (``nonlocal_average``), else the local mean itself.
+
+    Removed tets carry ~0 W: they are left out so that they do not dilute W on the cut surface.
+    """
+    include = ~np.asarray(removed, dtype=bool)
+    W_nodes = tet_to_node(
+        strain_energy, mesh.tets, volumes, mesh.n_nodes, include=include, incidence=incidence
+    )
+    if length_m <= 0.0:
+        return W_nodes
+    if incidence is None:
+        weights = np.bincount(mesh.tets.reshape(-1), np.repeat(volumes * include, 4), mesh.n_nodes)
+    else:
+        weights = incidence @ include.astype(float)
+    return nonlocal_mean(W_nodes, weights, grid.shape, axis_kernels(grid.axes(), length_m))
+
+
 def dissection_step(
     level_set: np.ndarray,
     strain_energy: np.ndarray,
@@ -60,12 +90,17 @@ def dissection_step(
 ) -> DissectionStep:
     """Advance the cut one step dt (s) under the strain energy per tet (J/m^3).
 
-    Removed tets carry ~0 W: they are left out of the nodal average so that they do not dilute
-    W on the cut surface. ``previous`` is the last topology (its loose fragments are reused when
-    the removed mask is unchanged).
+    The front is driven by ``cut_driver`` (the law's non-local length). ``previous`` is the
+    last topology (its loose fragments are reused when the removed mask is unchanged).
     """
-    W_nodes = tet_to_node(
-        strain_energy, mesh.tets, volumes, mesh.n_nodes, include=~removed, incidence=incidence
+    W_nodes = cut_driver(
+        strain_energy,
+        removed,
+        mesh=mesh,
+        grid=grid,
+        volumes=volumes,
+        incidence=incidence,
+        length_m=law.nonlocal_length_m,
     )
     F = front_speed(W_nodes, law.kappa_j_per_m3, law.v0_m_per_s)
     adv = advance(level_set.reshape(grid.shape), F, grid_spacing(grid), dt, cfl=law.cfl)

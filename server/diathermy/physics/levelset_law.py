@@ -21,6 +21,9 @@ REINIT_BAND_CELLS = 6.0
 """Half-width of the re-initialised band around the front, in cells of the largest spacing,
 worked on around the removed region only (at 64x64x128 nodes the whole block takes ~0.6 s
 against ~15 ms for a small crater)."""
+NONLOCAL_LENGTH_M = 0.0
+"""Material length l in m over which the strain energy driving the front is averaged
+(``nonlocal_average``); 0 is the local law of PHYSICS.md section 4."""
 MAX_SUBSTEPS = 10_000
 """Sub-steps one physical step may take before ``advance`` gives up."""
 
@@ -28,9 +31,11 @@ MAX_SUBSTEPS = 10_000
 @dataclass(frozen=True)
 class LevelSetLaw:
     """The dissection law of a run: front speed scale v0 (m/s), damage threshold kappa
-    (J/m^3), CFL number of the sub-steps, re-initialisation every this many dissection steps."""
+    (J/m^3), CFL number of the sub-steps, re-initialisation every this many dissection steps,
+    and the material length (m) of the non-local driver (0: local)."""
 
     v0_m_per_s: float
     kappa_j_per_m3: float
     cfl: float
     reinit_every: int
+    nonlocal_length_m: float = NONLOCAL_LENGTH_M

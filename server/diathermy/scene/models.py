@@ -9,7 +9,13 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from diathermy.errors import MeshError
 from diathermy.mesh import Grid
-from diathermy.physics.levelset_law import CFL, REINIT_EVERY, V0_M_PER_S, LevelSetLaw
+from diathermy.physics.levelset_law import (
+    CFL,
+    NONLOCAL_LENGTH_M,
+    REINIT_EVERY,
+    V0_M_PER_S,
+    LevelSetLaw,
+)
 from diathermy.physics.materials import Tissue
 from diathermy.scene.resolution import MAX_GRADED_NODES, Resolution, graded_grid
 
@@ -201,6 +207,11 @@ class LevelSetConfig(_Model):
     v0_m_per_s: Positive = V0_M_PER_S
     reinit_every: Annotated[int, Field(ge=1)] = REINIT_EVERY
     cfl: Annotated[float, Field(gt=0, le=1)] = CFL
+    nonlocal_length_m: Annotated[float, Field(ge=0, le=0.01)] = Field(
+        NONLOCAL_LENGTH_M,
+        description="material length l (m) over which the strain energy that drives the cut is "
+        "averaged (Gaussian, healthy tissue only); 0 is the local law",
+    )
 
     def law(self, kappa_j_per_m3: float) -> LevelSetLaw:
         """The law these settings give with the tissue's damage threshold kappa (J/m^3)."""
@@ -209,6 +220,7 @@ class LevelSetConfig(_Model):
             kappa_j_per_m3=kappa_j_per_m3,
             cfl=self.cfl,
             reinit_every=self.reinit_every,
+            nonlocal_length_m=self.nonlocal_length_m,
         )
 
 
