@@ -4,6 +4,7 @@ run -> report round trip on a coarse graded grid."""
 from __future__ import annotations
 
 import importlib.util
+import json
 import math
 from pathlib import Path
 from types import ModuleType
@@ -54,3 +55,26 @@ def test_run_then_report(bench: ModuleType, tmp_path: Path, monkeypatch) -> None
     text = (tmp_path / "convergence.md").read_text()
     assert "| 4mm (" in text and "42.52 W" in text
     assert (tmp_path / "convergence.png").stat().st_size > 0
+
+
+def test_drilling_rate_is_the_depth_slope(bench: ModuleType) -> None:
+    t = np.arange(1, 61) * 0.03
+    d = {"time_s": t, "depth_m": 1e-3 + 4e-3 * t}  # 4 mm/s
+    assert bench.drilling_rate(d) == pytest.approx(4e-3, rel=1e-9)
+    assert math.isnan(bench.drilling_rate({"time_s": t[:30], "depth_m": t[:30]}))  # ends early
+
+
+def test_nonlocal_run_and_probe_then_report(bench: ModuleType, tmp_path: Path, monkeypatch) -> None:
+    """A non-local run lands in its own table beside the local run of its grid, not in the
+    ladder; the floor probe's JSON becomes the table under the contact."""
+    monkeypatch.setattr(bench, "RESULTS", tmp_path)
+    bench.run(4.0, moving=False, seconds=0.09, wall_limit=60.0)
+    out = bench.run(4.0, moving=False, seconds=0.09, wall_limit=60.0, length_mm=2.0)
+    assert out.name == "convergence_fixed_4mm_l2.npz" and float(np.load(out)["length_mm"]) == 2.0
+    probe = bench.floor_probe(4.0, 3)
+    records = json.loads(probe.read_text())["4"]
+    assert len(records) == 3 and records[-1]["floor_t_k"] > 310.0
+    bench.report()
+    text = (tmp_path / "convergence.md").read_text()
+    assert "| 4 mm | 2 |" in text  # the non-local table
+    assert "4mm_l2 (" not in text  # not a row of the ladder
