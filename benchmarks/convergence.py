@@ -308,12 +308,14 @@ def _probe_lines() -> list[str]:
         "per second over the steps it stays the floor node; uncovered / cut at: its median "
         "temperature on the step it became the floor / the step before the next one did; "
         "column power: the Joule power in the tets under the disk within 0.4 / 0.8 mm of the "
-        f"floor, against the delivered power. The resolved contact heats the tissue right under "
+        f"floor, against the delivered power, over the second half of the probed steps and on "
+        "the first step (*flat*: the untouched surface). The resolved contact heats the tissue right under "
         f"the disk at j0^2 / (sigma rho c) = {5.72e4**2 / 0.33 / (1019.8 * 3441):.0f} K/s.",
         "",
         "| fine mm | steps | floor heating K/s | uncovered at K | cut at K | layer steps "
-        "| column 0.4 mm W | column 0.8 mm W | delivered W |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| column 0.4 mm W | column 0.8 mm W | delivered W | flat: column 0.8 mm W | flat: "
+        "delivered W |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for fine, rec in sorted(json.loads(path.read_text()).items(), key=lambda kv: -float(kv[0])):
         cutting = [r for r in rec if r["floor_depth_mm"] > 0]
@@ -337,7 +339,8 @@ def _probe_lines() -> list[str]:
             f"{np.median(lengths[1:]) + 1 if len(lengths) > 1 else math.nan:.0f} | "
             f"{np.median([r['column_0_0.4mm_w'] for r in tail]):.2f} | "
             f"{np.median([r['column_0_0.8mm_w'] for r in tail]):.2f} | "
-            f"{np.median([r['power_w'] for r in tail]):.1f} |"
+            f"{np.median([r['power_w'] for r in tail]):.1f} | "
+            f"{rec[0]['column_0_0.8mm_w']:.2f} | {rec[0]['power_w']:.1f} |"
         )
     return lines
 
