@@ -69,11 +69,17 @@ DT_S = 0.03
 
 
 def scene_for(
-    fine_mm: float | None, *, moving: bool, dt_s: float = DT_S, length_mm: float | None = None
+    fine_mm: float | None,
+    *,
+    moving: bool,
+    dt_s: float = DT_S,
+    length_mm: float | None = None,
+    contact: str | None = None,
 ) -> Scene:
     """The fixed electrode (current-density drive) with its resolution at ``fine_mm`` (0: uniform
     33x33x65), or the moving electrode as shipped (``fine_mm`` None: its own grid); the cut
-    driver's non-local length at ``length_mm`` (None: the scene's)."""
+    driver's non-local length at ``length_mm`` and the electrode's contact model at ``contact``
+    (None: the scene's)."""
     scene = builtin_scene("moving-electrode" if moving else "fixed-electrode")
     if fine_mm is not None and fine_mm <= 0:
         scene = scene.on_uniform_grid(UNIFORM)
@@ -85,15 +91,25 @@ def scene_for(
     base["dt_s"] = dt_s
     if length_mm is not None:
         base["level_set"] = {**base["level_set"], "nonlocal_length_m": length_mm * 1e-3}
+    if contact is not None:
+        base["electrodes"] = [{**e, "contact": contact} for e in base["electrodes"]]
     return Scene.model_validate(base)
 
 
-def tag_of(fine_mm: float | None, moving: bool, dt_s: float = DT_S, length_mm: float = 0.0) -> str:
-    """The run's file tag: scene, grid, dt if not the default, the non-local length if any."""
+def tag_of(
+    fine_mm: float | None,
+    moving: bool,
+    dt_s: float = DT_S,
+    length_mm: float = 0.0,
+    contact: str = "flat",
+) -> str:
+    """The run's file tag: scene, grid, dt if not the default, the non-local length if any, the
+    contact model if not flat."""
     kind = "moving" if moving else "fixed"
     grid = "default" if fine_mm is None else "uniform" if fine_mm <= 0 else f"{fine_mm:g}mm"
     tag = f"{kind}_{grid}" + ("" if dt_s == DT_S else f"_dt{dt_s:g}")
-    return tag + (f"_l{length_mm:g}" if length_mm > 0 else "")
+    tag += f"_l{length_mm:g}" if length_mm > 0 else ""
+    return tag + ("" if contact == "flat" else f"_{contact}")
 
 
 def front_strain_energy(sim: Simulation) -> float:
@@ -130,9 +146,11 @@ def run(
     wall_limit: float,
     dt_s: float = DT_S,
     length_mm: float | None = None,
+    contact: str | None = None,
 ) -> Path:
-    scene = scene_for(fine_mm, moving=moving, dt_s=dt_s, length_mm=length_mm)
+    scene = scene_for(fine_mm, moving=moving, dt_s=dt_s, length_mm=length_mm, contact=contact)
     length_mm = scene.level_set.nonlocal_length_m * 1e3
+    contact = scene.electrodes[0].contact
     t0 = time.perf_counter()
     sim = Simulation(scene)
     build_s = time.perf_counter() - t0
@@ -177,7 +195,7 @@ def run(
             break
     if not moving:
         profiles["profile_end"] = crater_profile(sim, centre)
-    out = RESULTS / f"convergence_{tag_of(fine_mm, moving, dt_s, length_mm)}.npz"
+    out = RESULTS / f"convergence_{tag_of(fine_mm, moving, dt_s, length_mm, contact)}.npz"
     res = scene.resolution
     np.savez(
         out,
@@ -194,6 +212,7 @@ def run(
         max_rss_mib=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
         target_s=seconds,
         length_mm=length_mm,
+        contact=contact,
     )
     print(f"{out.name}: {len(rec['time_s'])} steps to t = {rec['time_s'][-1]:.2f} s")
     return out
@@ -467,6 +486,11 @@ def _power_lines(ref_w: float) -> list[str]:
     return lines
 
 
+def _contact(d: dict[str, np.ndarray]) -> str:
+    """The run's contact model ('flat' for older runs)."""
+    return str(d["contact"]) if "contact" in d else "flat"
+
+
 def _length_mm(d: dict[str, np.ndarray]) -> float:
     """The run's non-local length of the cut driver in mm (0: the local law, older runs)."""
     return float(d["length_mm"]) if "length_mm" in d else 0.0
@@ -520,18 +544,21 @@ def _drilling_lines(runs: dict[str, dict[str, np.ndarray]], keys: list[str]) -> 
     return lines
 
 
-def _nonlocal_lines(runs: dict[str, dict[str, np.ndarray]], keys: list[str]) -> list[str]:
+def _variant_lines(runs: dict[str, dict[str, np.ndarray]], keys: list[str]) -> list[str]:
     """The non-local driver's runs beside the local-law run on the same grid."""
     if not keys:
         return []
     t_cmp = min(float(runs[k]["time_s"][-1]) for k in keys)
     lines = [
         "",
-        f"Non-local cut driver (`level_set.nonlocal_length_m` = l; W averaged over l before it "
-        f"drives the front), at t = {t_cmp:.2f} s against the local law on the same grid:",
+        f"Model variants against the shipped model on the same grid, at t = {t_cmp:.2f} s: the "
+        "non-local cut driver (`level_set.nonlocal_length_m` = l; W averaged over l before it "
+        "drives the front) and the draped contact (`electrodes[].contact` = draped: the disk "
+        "follows the crater's surface under each of its points):",
         "",
-        "| grid | l mm | first cut interp. s | cut mm^3 | depth mm | cut / local |",
-        "|---|---:|---:|---:|---:|---:|",
+        "| grid | l mm | contact | first cut interp. s | cut mm^3 | depth mm | cut / shipped "
+        "| deepening rate mm/s |",
+        "|---|---:|---|---:|---:|---:|---:|---:|",
     ]
     for k in keys:
         d = runs[k]
@@ -540,9 +567,10 @@ def _nonlocal_lines(runs: dict[str, dict[str, np.ndarray]], keys: list[str]) -> 
         ref = _at(base["time_s"], base["cut_m3"], t_cmp) if base is not None else math.nan
         s = summary(d)
         lines.append(
-            f"| {float(d['fine_mm']):g} mm | {_length_mm(d):g} | {_fmt(s['cut_interp'], 1.0, 3)} "
+            f"| {float(d['fine_mm']):g} mm | {_length_mm(d):g} | {_contact(d)} | "
+            f"{_fmt(s['cut_interp'], 1.0, 3)} "
             f"| {_fmt(cut, 1e9)} | {_fmt(_at(d['time_s'], d['depth_m'], t_cmp), 1e3)} | "
-            f"{_fmt(cut / ref if ref else math.nan, 1.0, 3)} |"
+            f"{_fmt(cut / ref if ref else math.nan, 1.0, 3)} | {_fmt(drilling_rate(d), 1e3)} |"
         )
     return lines
 
@@ -557,14 +585,22 @@ def report() -> None:
         p.stem.removeprefix("convergence_"): dict(np.load(p))
         for p in RESULTS.glob("convergence_*.npz")
     }
-    local = [k for k in runs if k.startswith("fixed") and _length_mm(runs[k]) == 0.0]
+    local = [
+        k
+        for k in runs
+        if k.startswith("fixed") and _length_mm(runs[k]) == 0.0 and _contact(runs[k]) == "flat"
+    ]
     fixed = sorted(
         (k for k in local if float(runs[k]["dt_s"]) == DT_S),
         key=lambda k: -float(runs[k]["fine_mm"]) if float(runs[k]["fine_mm"]) > 0 else -1e9,
     )
     dt_runs = sorted(local, key=lambda k: (-float(runs[k]["fine_mm"]), -float(runs[k]["dt_s"])))
-    nonlocal_runs = sorted(
-        (k for k in runs if k.startswith("fixed") and _length_mm(runs[k]) > 0.0),
+    variant_runs = sorted(
+        (
+            k
+            for k in runs
+            if k.startswith("fixed") and (_length_mm(runs[k]) > 0.0 or _contact(runs[k]) != "flat")
+        ),
         key=lambda k: (-float(runs[k]["fine_mm"]), _length_mm(runs[k])),
     )
     moving = sorted(k for k in runs if k.startswith("moving"))
@@ -677,7 +713,7 @@ def report() -> None:
             )
     lines += _drilling_lines(runs, [k for k in dt_runs if float(runs[k]["fine_mm"]) > 0])
     lines += _probe_lines()
-    lines += _nonlocal_lines(runs, nonlocal_runs)
+    lines += _variant_lines(runs, variant_runs)
     if moving:
         lines += [
             "",
@@ -763,6 +799,9 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument(
         "--length-mm", type=float, help="non-local length of the cut driver (default: the scene's)"
     )
+    r.add_argument(
+        "--contact", choices=("flat", "draped"), help="contact model (default: the scene's)"
+    )
     pw = sub.add_parser("power")
     pw.add_argument("--fine-mm", type=float, nargs="+", required=True)
     mj = sub.add_parser("main-job")
@@ -783,6 +822,7 @@ def main(argv: list[str] | None = None) -> int:
             wall_limit=a.wall_limit,
             dt_s=a.dt,
             length_mm=a.length_mm,
+            contact=a.contact,
         )
     elif a.cmd == "power":
         power(a.fine_mm)

@@ -43,6 +43,9 @@ def test_scene_family(bench: ModuleType) -> None:
     assert moving == bench.builtin_scene("moving-electrode")  # as shipped: 50 W, its grid
     assert bench.tag_of(0.8, False, 0.015) == "fixed_0.8mm_dt0.015"
     assert bench.tag_of(None, True) == "moving_default"
+    assert bench.tag_of(0.4, False, contact="draped") == "fixed_0.4mm_draped"
+    draped = bench.scene_for(0.4, moving=False, contact="draped")
+    assert draped.electrodes[0].contact == "draped"
 
 
 def test_run_then_report(bench: ModuleType, tmp_path: Path, monkeypatch) -> None:
@@ -76,5 +79,5 @@ def test_nonlocal_run_and_probe_then_report(bench: ModuleType, tmp_path: Path, m
     assert len(records) == 3 and records[-1]["floor_t_k"] > 310.0
     bench.report()
     text = (tmp_path / "convergence.md").read_text()
-    assert "| 4 mm | 2 |" in text  # the non-local table
+    assert "| 4 mm | 2 | flat |" in text  # the variants' table
     assert "4mm_l2 (" not in text  # not a row of the ladder

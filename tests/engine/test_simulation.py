@@ -91,8 +91,13 @@ def test_energy_balance_of_a_heated_run_closes():
     assert stored == pytest.approx(e["joule_in"] - e["convective_out"], rel=1e-6)
 
 
-def test_cut_happens_and_electrode_follows_crater():
-    sim = Simulation(tiny_scene())
+def draped(**kw) -> Electrode:
+    return Electrode(position_m=(0.01, 0.005), power_w=30.0, contact="draped", **kw)
+
+
+@pytest.mark.parametrize("contact", ["flat", "draped"])
+def test_cut_happens_and_electrode_follows_crater(contact):
+    sim = Simulation(tiny_scene(electrodes=[draped().model_copy(update={"contact": contact})]))
     reports = sim.run(40)
     cut = [r.cut_volume_m3 for r in reports]
     assert cut[-1] > 0 and all(b >= a for a, b in zip(cut, cut[1:], strict=False))  # irreversible
@@ -100,10 +105,15 @@ def test_cut_happens_and_electrode_follows_crater():
     assert 0 < depth < 0.01
     (key,) = sim.ctx.contacts.entries
     assert key[2] < sim.ctx.top_z  # the contact disk sits on the crater floor, not the old top
+    if contact == "draped":  # each point on the healthy surface under it, none above the top
+        heights = np.asarray(key[4:])
+        assert heights.size == 16 * 64 and np.nanmax(heights) <= sim.ctx.top_z
+        assert np.nanmin(heights) < sim.ctx.top_z and np.all(heights[np.isfinite(heights)] > 0)
 
 
-def test_checkpoint_restore_continues_bit_for_bit(tmp_path):
-    sim = Simulation(tiny_scene())
+@pytest.mark.parametrize("contact", ["flat", "draped"])
+def test_checkpoint_restore_continues_bit_for_bit(tmp_path, contact):
+    sim = Simulation(tiny_scene(electrodes=[draped().model_copy(update={"contact": contact})]))
     sim.run(18)  # past boiling and into the cut
     # both AMG hierarchies are kept from before the cut: the restore must rebuild those
     fem = fem_of(sim.ctx.mechanics)

@@ -21,16 +21,16 @@ import numpy as np
 from pydantic import ValidationError
 
 from diathermy.engine.backends import fem_of
+from diathermy.engine.contact import weights_of
 from diathermy.engine.context import EngineContext
 from diathermy.engine.effects.electric import conductivity
 from diathermy.engine.effects.mechanics import load_key
 from diathermy.engine.electrodes import ElectrodeOverride
 from diathermy.engine.ledger import EnergyLedger
 from diathermy.engine.state import SimulationState
-from diathermy.errors import CheckpointError, MeshError
+from diathermy.errors import CheckpointError, MeshError, SceneError
 from diathermy.fem.solvers import ReuseState
 from diathermy.mesh.grid_attrs import grid_attrs, grid_from_attrs
-from diathermy.physics.contact_load import contact_weights
 from diathermy.physics.incremental_mechanics import IncrementalFEMBackend
 from diathermy.physics.mechanics_backend import HierarchyOrigin
 from diathermy.physics.topology import evaluate_topology
@@ -246,10 +246,13 @@ def restore_solver_state(
     if "potential_warm_start" in solver:
         ctx.potential.solver.krylov.warm_start = solver["potential_warm_start"]
     if "potential_unit_V" in solver:
-        x, y, z, r = (float(v) for v in solver["potential_contact_key"])
-        contact = contact_weights(ctx.disc.mesh, (x, y, z), r)
-        ctx.contacts.put((x, y, z, r), contact)
-        memory.contacts = ((x, y, z, r),)
+        key = tuple(float(v) for v in np.ravel(solver["potential_contact_key"]))
+        try:
+            contact = weights_of(ctx.disc, key)
+        except (SceneError, ValueError) as e:
+            raise CheckpointError(f"checkpoint's contact disk is not valid: {e}") from e
+        ctx.contacts.put(key, contact)
+        memory.contacts = (key,)
         sigma = solver.get("potential_sigma")
         ctx.potential.solver.set_conductivity(conductivity(ctx, state) if sigma is None else sigma)
         ctx.potential.restore_unit_field(

@@ -9,7 +9,13 @@ from diathermy.engine.discretization import Discretization
 from diathermy.engine.electrodes import ElectrodePose
 from diathermy.engine.state import ContactKey, SimulationState
 from diathermy.errors import SceneError
-from diathermy.physics.contact_load import ContactWeights, contact_weights
+from diathermy.physics.contact_load import (
+    N_ANGULAR,
+    N_RADIAL,
+    ContactWeights,
+    contact_weights,
+    disk_quadrature,
+)
 from diathermy.physics.electric import ElectrodeDrive
 from diathermy.physics.topology import REMOVED_FRACTION, contact_height
 
@@ -23,9 +29,8 @@ class ContactCache:
     def get(self, disc: Discretization, key: ContactKey) -> ContactWeights | None:
         """The disk of ``key``; None when it touches no node of the top surface."""
         if key not in self.entries:
-            x, y, z, r = key
             try:
-                self.entries = {key: contact_weights(disc.mesh, (x, y, z), r)}
+                self.entries = {key: weights_of(disc, key)}
             except SceneError:
                 return None
         return self.entries[key]
@@ -37,6 +42,14 @@ class ContactCache:
     def put(self, key: ContactKey, contact: ContactWeights) -> None:
         """Cache ``contact`` as the only entry (a restored run's disk)."""
         self.entries = {key: contact}
+
+
+def weights_of(disc: Discretization, key: ContactKey) -> ContactWeights:
+    """The nodal weights of a contact key: a flat disk (x, y, z, r), or one draped over the
+    heights that follow."""
+    x, y, z, r = (float(v) for v in key[:4])
+    heights = np.asarray(key[4:], dtype=float) if len(key) > 4 else None
+    return contact_weights(disc.mesh, (x, y, z), r, heights_m=heights)
 
 
 def drives_current(pose: ElectrodePose) -> bool:
@@ -61,10 +74,57 @@ def contact_level_set(disc: Discretization, state: SimulationState) -> np.ndarra
     return disc.to_grid(phi)
 
 
+def draped_heights(
+    disc: Discretization,
+    phi_grid: np.ndarray,
+    removed: np.ndarray,
+    x: float,
+    y: float,
+    r: float,
+) -> np.ndarray:
+    """Height (m) of the healthy surface under each quadrature point of the contact disk at
+    (x, y) of radius r; NaN where the point is off the block, its column is cut through to the
+    bottom, or no healthy tet holds it.
+
+    Each point goes on its healthy node layer as ``contact_key`` puts the centre; a point that
+    still lands in a removed tet (a cell mostly healthy whose corner tet is cut) goes just under
+    the layer, into the cell below, so that its current enters tissue (``removed``: per tet).
+    """
+    g = disc.grid
+    pts, _ = disk_quadrature(np.array([x, y, 0.0]), r, N_RADIAL, N_ANGULAR)
+    (x0, y0, z0), (lx, ly, _) = g.origin_m, g.size_m
+    on = (pts[:, 0] >= x0) & (pts[:, 0] <= x0 + lx) & (pts[:, 1] >= y0) & (pts[:, 1] <= y0 + ly)
+    z = np.full(pts.shape[0], np.nan)
+    if not on.any():
+        return z
+    h = np.asarray(contact_height(phi_grid, g, pts[on, 0], pts[on, 1]), dtype=float)
+    zs = g.axes()[2]
+    kk = np.clip(np.searchsorted(zs, h, side="right") - 1, 0, zs.size - 2)
+    dz = zs[kk + 1] - zs[kk]
+    kk = np.where(zs[kk + 1] - h <= 1e-9 * dz, np.minimum(kk + 1, zs.size - 1), kk)
+    layer = zs[kk]
+    h = np.where(h - layer < REMOVED_FRACTION * dz, layer, h)
+
+    def in_removed(heights: np.ndarray) -> np.ndarray:
+        xyz = np.column_stack([pts[on, 0], pts[on, 1], np.maximum(heights, z0)])
+        return np.asarray(removed[disc.mesh.locate(xyz)[0]], dtype=bool)
+
+    bad = in_removed(h)
+    if bad.any():  # just under its layer, else dropped
+        h = np.where(bad, layer - 1e-6 * dz, h)
+        bad = in_removed(h)
+    h = np.where(bad | (h <= z0 + 1e-9 * dz), np.nan, h)
+    z[on] = h
+    return z
+
+
 def contact_key(
     disc: Discretization, state: SimulationState, pose: ElectrodePose, *, top_z: float, cut: bool
 ) -> ContactKey | None:
-    """The contact disk (x, y, z, r) of an electrode on the healthy surface below it.
+    """The contact disk (x, y, z, r) of an electrode on the healthy surface below it; a draped
+    contact (``pose.contact``) adds the height of each of its quadrature points
+    (``draped_heights``), so that the disk follows the crater's surface under it instead of
+    cutting through its walls at the centre's height.
 
     None when the cut under its centre reaches the bottom (the return electrode): no tissue is
     left between the electrodes. ``cut``: the scene dissects and some tet is removed.
@@ -96,6 +156,10 @@ def contact_key(
             z = z_layer
         if z <= z0 + 1e-9 * dz:
             return None
+        if pose.contact == "draped":
+            phi = contact_level_set(disc, state)
+            heights = draped_heights(disc, phi, state["removed"], x, y, pose.radius_m)
+            return (x, y, z, pose.radius_m, *(float(h) for h in heights))
     return (x, y, z, pose.radius_m)
 
 

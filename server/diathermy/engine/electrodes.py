@@ -68,6 +68,7 @@ class ElectrodePose:
     power_w: float
     current_density_a_per_m2: float
     active: bool
+    contact: str = "flat"
 
 
 def electrode_pose(
@@ -88,6 +89,7 @@ def electrode_pose(
         name=el.name,
         position_m=(float(pos[0]), float(pos[1])),
         radius_m=el.radius_m,
+        contact=el.contact,
         drive="power"
         if o.power_w is not None
         else ("current_density" if o.current_density_a_per_m2 is not None else el.drive),

@@ -23,8 +23,9 @@ NODAL_FIELDS = (
 VECTOR_FIELDS = ("displacement",)
 CELL_FIELDS = ("joule_heat", "strain_energy", "removed")
 
-ContactKey = tuple[float, float, float, float]
-"""A contact disk: centre (x, y, z) and radius, in m."""
+ContactKey = tuple[float, ...]
+"""A contact disk: centre (x, y, z) and radius, in m; a draped disk adds the height (m) of each
+of its quadrature points (NaN: no tissue under the point)."""
 
 
 @dataclass

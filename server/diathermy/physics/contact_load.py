@@ -48,18 +48,28 @@ def disk_quadrature(
     return pts, w
 
 
+N_RADIAL = 16
+"""Gauss-Legendre points of the contact disk's quadrature in r."""
+N_ANGULAR = 64
+"""Equispaced angles of the contact disk's quadrature."""
+
+
 def contact_weights(
     mesh: TetMesh,
     center_m: tuple[float, float, float] | np.ndarray,
     radius_m: float,
     *,
-    n_radial: int = 16,
-    n_angular: int = 64,
+    heights_m: np.ndarray | None = None,
+    n_radial: int = N_RADIAL,
+    n_angular: int = N_ANGULAR,
 ) -> ContactWeights:
     """Nodal weights of a contact disk of radius a centred at center_m = (x, y, z), in m.
 
-    Quadrature points outside the block are dropped (an electrode over an edge loses that part
-    of its area); the others are spread over their tet's vertices by barycentric coordinates.
+    ``heights_m`` (one z per quadrature point of ``disk_quadrature``, in m) drapes the disk
+    over a surface: each point keeps its (x, y) and its weight (the projected area) but sits
+    at its own height; points with a NaN height are dropped (no tissue under them). Quadrature
+    points outside the block are dropped (an electrode over an edge loses that part of its
+    area); the others are spread over their tet's vertices by barycentric coordinates.
     """
     center = np.asarray(center_m, dtype=float)
     if center.shape != (3,) or not np.all(np.isfinite(center)):
@@ -67,6 +77,13 @@ def contact_weights(
     if not radius_m > 0:
         raise SceneError(f"electrode contact radius must be positive, got {radius_m}")
     pts, w = disk_quadrature(center, radius_m, n_radial, n_angular)
+    if heights_m is not None:
+        z = np.asarray(heights_m, dtype=float)
+        if z.shape != (pts.shape[0],):
+            raise SceneError(f"draped contact needs {pts.shape[0]} heights, got shape {z.shape}")
+        keep = np.isfinite(z)
+        pts, w = pts[keep], w[keep]
+        pts[:, 2] = z[keep]
     inside = mesh.grid.contains(pts)
     pts, w = pts[inside], w[inside]
     if w.size == 0:

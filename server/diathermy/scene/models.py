@@ -99,6 +99,11 @@ class Electrode(_Model):
         (0.1, 0.05), description="(x, y) of the contact centre on the top surface, m"
     )
     radius_m: Positive = 1.17e-3
+    contact: Literal["flat", "draped"] = Field(
+        "flat",
+        description="in a crater, the contact disk lies flat at the healthy surface's height "
+        "under its centre ('flat'), or follows that surface under each of its points ('draped')",
+    )
     drive: Literal["current_density", "power"] = "power"
     current_density_a_per_m2: NonNegative = 5.72e4
     power_w: NonNegative = 50.0
