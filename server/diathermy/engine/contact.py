@@ -136,7 +136,8 @@ def contact_key(
         # a centre just off an edge still touches with part of its disk: use the nearest column
         (x0, y0, z0), (lx, ly, _) = g.origin_m, g.size_m
         xc, yc = min(max(x, x0), x0 + lx), min(max(y, y0), y0 + ly)
-        z = float(contact_height(contact_level_set(disc, state), g, xc, yc))
+        phi = contact_level_set(disc, state)
+        z = float(contact_height(phi, g, xc, yc))
         # A front in the lower half of a cell layer leaves that layer's tets removed (half or
         # more cut): the disk goes down to the node layer under it, the top of the healthy
         # tets. Left in between, it loaded tets of sigma ~ 0 and the set power went into the
@@ -157,7 +158,6 @@ def contact_key(
         if z <= z0 + 1e-9 * dz:
             return None
         if pose.contact == "draped":
-            phi = contact_level_set(disc, state)
             heights = draped_heights(disc, phi, state["removed"], x, y, pose.radius_m)
             return (x, y, z, pose.radius_m, *(float(h) for h in heights))
     return (x, y, z, pose.radius_m)
