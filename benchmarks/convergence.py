@@ -282,6 +282,7 @@ def floor_probe(fine_mm: float, steps: int) -> Path:
     centroids = mesh.points[mesh.tets].mean(axis=1)
     r_xy = np.hypot(centroids[:, 0] - x, centroids[:, 1] - y)
     in_disk = r_xy < scene.electrodes[0].radius_m
+    near = r_xy < 2.0 * scene.electrodes[0].radius_m  # the hole and its walls
     records, last_k = [], None
     for _ in range(steps):
         r = sim.step()
@@ -305,6 +306,7 @@ def floor_probe(fine_mm: float, steps: int) -> Path:
                 "column_0_0.8mm_w": float(
                     q[in_disk & healthy & (below >= 0) & (below < 8e-4)].sum()
                 ),
+                "walls_1mm_w": float(q[near & healthy & (below < 0) & (below > -1e-3)].sum()),
             }
         )
         last_k = k
@@ -327,14 +329,16 @@ def _probe_lines() -> list[str]:
         "per second over the steps it stays the floor node; uncovered / cut at: its median "
         "temperature on the step it became the floor / the step before the next one did; "
         "column power: the Joule power in the tets under the disk within 0.4 / 0.8 mm of the "
-        f"floor, against the delivered power, over the second half of the probed steps and on "
-        "the first step (*flat*: the untouched surface). The resolved contact heats the tissue right under "
-        f"the disk at j0^2 / (sigma rho c) = {5.72e4**2 / 0.33 / (1019.8 * 3441):.0f} K/s.",
+        "floor; walls: in the tets within 1 mm above the floor's height and two disk radii of "
+        "the axis (the hole's walls); against the delivered power, over the second half of the "
+        "probed steps and on the first step (*flat*: the untouched surface). The resolved "
+        "contact heats the tissue right under the disk at j0^2 / (sigma rho c) = "
+        f"{5.72e4**2 / 0.33 / (1019.8 * 3441):.0f} K/s.",
         "",
         "| fine mm | steps | floor heating K/s | uncovered at K | cut at K | layer steps "
-        "| column 0.4 mm W | column 0.8 mm W | delivered W | flat: column 0.8 mm W | flat: "
-        "delivered W |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| column 0.4 mm W | column 0.8 mm W | walls W | delivered W | flat: column 0.8 mm W "
+        "| flat: delivered W |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for fine, rec in sorted(json.loads(path.read_text()).items(), key=lambda kv: -float(kv[0])):
         cutting = [r for r in rec if r["floor_depth_mm"] > 0]
@@ -358,6 +362,7 @@ def _probe_lines() -> list[str]:
             f"{np.median(lengths[1:]) + 1 if len(lengths) > 1 else math.nan:.0f} | "
             f"{np.median([r['column_0_0.4mm_w'] for r in tail]):.2f} | "
             f"{np.median([r['column_0_0.8mm_w'] for r in tail]):.2f} | "
+            f"{_fmt(float(np.median([r.get('walls_1mm_w', math.nan) for r in tail])))} | "
             f"{np.median([r['power_w'] for r in tail]):.1f} | "
             f"{rec[0]['column_0_0.8mm_w']:.2f} | {rec[0]['power_w']:.1f} |"
         )
