@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from diathermy.mesh import Grid, build_tet_mesh
-from diathermy.physics.incremental_mechanics import IncrementalSettings, local_solve
+from diathermy.physics.local_solve import IncrementalSettings, local_solve
 from diathermy.physics.mechanics import MechanicsSolver
 from diathermy.physics.patch_correction import node_graph
 from diathermy.physics.predictors import ritz_start

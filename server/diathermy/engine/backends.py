@@ -13,11 +13,8 @@ from typing import Literal
 
 from diathermy.engine.context import EngineContext
 from diathermy.errors import DiathermyError, SceneError
-from diathermy.physics.incremental_mechanics import (
-    DEFAULT_GUARD_TOLERANCE,
-    IncrementalFEMBackend,
-    IncrementalSettings,
-)
+from diathermy.physics.incremental_mechanics import IncrementalFEMBackend
+from diathermy.physics.local_solve import DEFAULT_GUARD_TOLERANCE, IncrementalSettings
 from diathermy.physics.mechanics_backend import FEMBackend, MechanicsBackend
 from diathermy.physics.predictors import DisplacementPredictor
 

@@ -24,106 +24,25 @@ accepted prediction, 'full'; ``["why"]``) and which predictor started it (``["pr
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 import scipy.sparse as sp
 
 from diathermy.fem.energy_cg import EnergyCG, energy_cg
+from diathermy.physics.local_solve import (
+    IncrementalSettings,
+    LocalSolve,
+    local_solve,
+)
 from diathermy.physics.mechanics import MechanicsSolver
 from diathermy.physics.mechanics_backend import FEMBackend, MechanicsOutput, Rescaled
-from diathermy.physics.patch_correction import node_graph, patch_correct, residual_patch
+from diathermy.physics.patch_correction import node_graph
 from diathermy.physics.predictors import (
-    DEFAULT_SWITCH_RESIDUAL,
     DisplacementPredictor,
     PredictorName,
     Start,
     choose_start,
 )
-
-DEFAULT_GUARD_TOLERANCE = 1e-2
-"""Relative residual the local path must reach: on the 9x9x17 test block with a cut, max
-strain-energy error 0.33 % and max temperature error 0.005 K against full solves (1e-3: mostly
-full solves; 3e-2: 0.83 %); the default grids: benchmarks/results/realtime.md."""
-DEFAULT_ENERGY_TOLERANCE = 1e-3
-"""Relative energy-norm error estimate (``fem.energy_cg``) a polished answer must reach."""
-DEFAULT_POLISH_ITERATIONS = 10
-"""PCG iterations with the kept hierarchy before the step falls back to the full solve."""
-Guard = Literal["residual", "energy"]
-
-
-@dataclass(frozen=True)
-class IncrementalSettings:
-    """Knobs of the local path: the residual it must reach, the full-solve interval, the patch."""
-
-    guard_tolerance: float = DEFAULT_GUARD_TOLERANCE
-    full_every: int = 10
-    patch_threshold: float = 0.1
-    patch_layers: int = 2
-    patch_max_nodes: int = 4000
-    patch_rounds: int = 1  # 3 passed the guard at 23 % SE error on 0.4 mm: docs/realtime.md
-    patch: bool = True  # mechanics.correction: 'patch', or 'none' (the Ritz-scaled start as is)
-    switch_residual: float = DEFAULT_SWITCH_RESIDUAL  # predictor 'auto': when to ask the network
-    guard: Guard = "residual"  # 'energy': only the polish's energy estimate accepts a step
-    energy_tolerance: float = DEFAULT_ENERGY_TOLERANCE
-    polish_iterations: int = DEFAULT_POLISH_ITERATIONS  # 0: no polish, the full solve
-
-    def __post_init__(self) -> None:
-        if not self.guard_tolerance > 0 or self.full_every < 1 or self.patch_rounds < 1:
-            raise ValueError("guard_tolerance must be > 0, full_every and patch_rounds >= 1")
-        if not 0 < self.energy_tolerance < 1 or self.polish_iterations < 0:
-            raise ValueError("energy_tolerance must lie in (0, 1), polish_iterations be >= 0")
-        if self.guard not in ("residual", "energy"):
-            raise ValueError(f"guard must be 'residual' or 'energy', got {self.guard!r}")
-
-
-@dataclass(frozen=True)
-class LocalSolve:
-    """The predictor's answer: u (n_nodes, 3) m, its residual, the patch size, the Ritz factor."""
-
-    u: np.ndarray
-    residual: float
-    residual_before: float
-    patch_nodes: np.ndarray  # nodes where u is not ritz_scale x the start
-    ritz_scale: float
-    predictor: str = "previous"
-
-
-def local_solve(
-    solver: MechanicsSolver,
-    start: Start,
-    f: np.ndarray,
-    graph: sp.csr_matrix,
-    settings: IncrementalSettings,
-    u_prev: np.ndarray | None = None,
-) -> LocalSolve:
-    """``start`` (Ritz-scaled, ``predictors.ritz_start``) patch-corrected on ``solver``'s system
-    with load f (n_nodes, 3) N; residuals over the free DOFs. ``u_prev`` (n_nodes, 3) m: the
-    warm start, whose constrained values the start zeroed (they count as moved)."""
-    free = ~solver.constrained.reshape(-1, 3)
-    u, Ku = start.u, start.Ku
-    moved = np.zeros(0, dtype=np.int64)
-    first = after = start.residual
-    for _ in range(settings.patch_rounds if settings.patch else 0):
-        # each round patches where the last one left off
-        nodes = residual_patch(
-            np.where(free, f - Ku, 0.0),
-            graph,
-            threshold=settings.patch_threshold,
-            layers=settings.patch_layers,
-            max_nodes=settings.patch_max_nodes,
-        )
-        patched = patch_correct(solver.K, f, u, Ku, free, nodes)
-        u, Ku, after = patched.u, patched.Ku, patched.residual_after
-        if patched.nodes:
-            moved = np.union1d(moved, nodes)
-        if after <= settings.guard_tolerance or not patched.nodes:
-            break
-    if u_prev is not None:
-        held = np.flatnonzero(np.any(~free & (u_prev != 0), axis=1))  # zeroed constrained values
-        moved = np.union1d(moved, held)
-    return LocalSolve(u, after, first, moved, start.ritz_scale, start.name)
 
 
 class IncrementalFEMBackend:
