@@ -41,7 +41,8 @@ from diathermy.fem.scalar import assemble_diffusion, assemble_robin, lumped_mass
 from diathermy.fem.sparsity import build_pattern
 from diathermy.mesh import Grid, build_tet_mesh
 from diathermy.physics.contact_load import contact_weights
-from diathermy.physics.electric import DrivenPotential, ElectrodeDrive, PotentialSolver, joule_heat
+from diathermy.physics.driven_potential import DrivenPotential, ElectrodeDrive
+from diathermy.physics.electric import PotentialSolver, joule_heat
 from diathermy.physics.electrothermal import ElectroThermal
 from diathermy.physics.heat_operator import assemble_heat_operator, heat_mesh  # noqa: E402
 from diathermy.physics.thermal import HeatStepper

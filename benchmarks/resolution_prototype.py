@@ -35,11 +35,8 @@ from diathermy.physics.contact_resistance import (  # noqa: E402
     equipotential_disk_resistance,
     uniform_flux_disk_resistance,
 )
-from diathermy.physics.electric import (  # noqa: E402
-    DrivenPotential,
-    ElectrodeDrive,
-    PotentialSolver,
-)
+from diathermy.physics.driven_potential import DrivenPotential, ElectrodeDrive  # noqa: E402
+from diathermy.physics.electric import PotentialSolver  # noqa: E402
 from diathermy.runtime import configure_threads  # noqa: E402
 from diathermy.scene.builtin import MOVING_PATH_M  # noqa: E402
 from diathermy.scene.models import ElectrodePath  # noqa: E402

@@ -11,13 +11,8 @@ from diathermy.fem.geometry import element_geometry, structured_geometry
 from diathermy.fem.scalar import surface_load, volume_load
 from diathermy.mesh import Grid, TetMesh, build_tet_mesh
 from diathermy.physics.contact_load import contact_weights, disk_quadrature
-from diathermy.physics.electric import (
-    DrivenPotential,
-    ElectrodeDrive,
-    PotentialSolver,
-    delivered_power,
-    joule_heat,
-)
+from diathermy.physics.driven_potential import DrivenPotential, ElectrodeDrive
+from diathermy.physics.electric import PotentialSolver, delivered_power, joule_heat
 
 A_M = 1.17e-3  # contact radius
 J0 = 5.72e4  # A/m^2

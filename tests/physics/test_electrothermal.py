@@ -8,7 +8,7 @@ import pytest
 from diathermy.fem.geometry import structured_geometry
 from diathermy.mesh import Grid, build_tet_mesh
 from diathermy.physics.contact_load import contact_weights
-from diathermy.physics.electric import ElectrodeDrive
+from diathermy.physics.driven_potential import ElectrodeDrive
 from diathermy.physics.electrothermal import ElectroThermal
 
 A_M = 1.17e-3

@@ -16,7 +16,8 @@ from diathermy.physics.contact_resistance import (
     equipotential_disk_resistance,
     uniform_flux_disk_resistance,
 )
-from diathermy.physics.electric import DrivenPotential, ElectrodeDrive, PotentialSolver
+from diathermy.physics.driven_potential import DrivenPotential, ElectrodeDrive
+from diathermy.physics.electric import PotentialSolver
 
 A_M, J0, SIGMA = 1.17e-3, 5.72e4, 0.33
 CENTRE = (0.1, 0.05, 0.1)

@@ -11,7 +11,8 @@ from diathermy.fem.geometry import structured_geometry
 from diathermy.mesh import Grid, build_tet_mesh
 from diathermy.mesh.grading import graded_axis
 from diathermy.physics.contact_load import contact_weights
-from diathermy.physics.electric import DrivenPotential, ElectrodeDrive, PotentialSolver, joule_heat
+from diathermy.physics.driven_potential import DrivenPotential, ElectrodeDrive
+from diathermy.physics.electric import PotentialSolver, joule_heat
 from diathermy.physics.heat_operator import heat_mesh
 from diathermy.physics.thermal import HeatStepper
 from tests.physics.convective_column import T_INF_K, T_INITIAL_K, column_max_error

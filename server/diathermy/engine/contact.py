@@ -16,7 +16,7 @@ from diathermy.physics.contact_load import (
     contact_weights,
     disk_quadrature,
 )
-from diathermy.physics.electric import ElectrodeDrive
+from diathermy.physics.driven_potential import ElectrodeDrive
 from diathermy.physics.topology import REMOVED_FRACTION, contact_height
 
 

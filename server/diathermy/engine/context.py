@@ -11,7 +11,8 @@ import scipy.sparse as sp
 from diathermy.engine.contact import ContactCache
 from diathermy.engine.discretization import Discretization, build_discretization
 from diathermy.fem.edges import edge_stiffness
-from diathermy.physics.electric import DrivenPotential, PotentialSolver
+from diathermy.physics.driven_potential import DrivenPotential
+from diathermy.physics.electric import PotentialSolver
 from diathermy.physics.electrothermal import ElectroThermal
 from diathermy.physics.heat_operator import heat_mesh
 from diathermy.physics.levelset import volume_incidence

@@ -27,7 +27,7 @@ from diathermy.engine.state import SimulationState, initial_state
 from diathermy.errors import SceneError
 from diathermy.mesh import Grid
 from diathermy.physics.cut_surface import CutSurface, cut_surface, write_cut_surface
-from diathermy.physics.electric import DrivenPotential
+from diathermy.physics.driven_potential import DrivenPotential
 from diathermy.physics.levelset import initial_level_set
 from diathermy.physics.materials import Tissue
 from diathermy.physics.mechanics_backend import MechanicsBackend

@@ -11,7 +11,7 @@ import numpy as np
 from diathermy.engine.electrodes import ElectrodePose
 from diathermy.engine.report import EffectReport
 from diathermy.physics.contact_load import ContactWeights
-from diathermy.physics.electric import ElectrodeDrive
+from diathermy.physics.driven_potential import ElectrodeDrive
 from diathermy.physics.heat_operator import HeatEnergy
 
 

@@ -1,4 +1,5 @@
-"""Quasi-static electric potential, Joule heat and the electrode drive (PHYSICS.md sections 1-2).
+"""Quasi-static electric potential and Joule heat (PHYSICS.md sections 1-2); the drive that sets
+the injected current is in ``driven_potential``.
 
 div(sigma grad V) = 0 with V = 0 on the bottom (z-), -sigma dV/dn = j on the electrode's contact
 disk and insulated elsewhere. The contact load is a quadrature of the disk itself, so the
@@ -22,18 +23,17 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, replace
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
-from diathermy.errors import SceneError, SolverDivergedError
+from diathermy.errors import SceneError
 from diathermy.fem.edges import EdgeStiffness, LaplacianPattern, laplacian_pattern
 from diathermy.fem.energy_cg import EnergyCG, energy_cg
 from diathermy.fem.multigrid import SCALAR_AMG_OPTIONS, scaled_candidates, unit_diagonal
 from diathermy.fem.solvers import KrylovSolver, ReuseState, SolveStats
 from diathermy.mesh import TetMesh
-from diathermy.physics.contact_load import ContactWeights, same_contact
 
 
 def joule_heat(grads: np.ndarray, tets: np.ndarray, sigma: np.ndarray, V: np.ndarray) -> np.ndarray:
@@ -48,21 +48,6 @@ def joule_heat(grads: np.ndarray, tets: np.ndarray, sigma: np.ndarray, V: np.nda
 def delivered_power(load: np.ndarray, V: np.ndarray) -> float:
     """Electrical power int j V over the contact in W: nodal current load (n_nodes,) in A . V."""
     return float(np.dot(load, V))
-
-
-@dataclass(frozen=True)
-class ElectrodeDrive:
-    """How the generator drives the electrode: a fixed current density or a fixed power."""
-
-    mode: Literal["current_density", "power"] = "current_density"
-    current_density_a_per_m2: float = 5.72e4
-    power_w: float = 50.0
-
-    def __post_init__(self) -> None:
-        if self.mode not in ("current_density", "power"):
-            raise SceneError(f"electrode drive mode must be current_density or power: {self.mode}")
-        if not self.current_density_a_per_m2 >= 0 or not self.power_w >= 0:
-            raise SceneError("electrode current density and power must be non-negative")
 
 
 @dataclass(frozen=True)
@@ -242,86 +227,3 @@ def _stats(st: SolveStats, assembly_s: float, *, reassembled: bool) -> Potential
         reassembled=reassembled,
         cached=False,
     )
-
-
-@dataclass(frozen=True)
-class PotentialSolution:
-    """The driven potential: V (n_nodes,) in V, nodal current load (n_nodes,) in A, I, P."""
-
-    V: np.ndarray
-    load: np.ndarray
-    current_a: float
-    power_w: float
-    stats: PotentialStats
-
-
-class DrivenPotential:
-    """The electrode's potential for any drive, from one solve at unit current per (sigma, contact).
-
-    V is linear in the injected current I and P = I^2 R, so the unit-current field V1 (with
-    R = int j1 V1) serves both drives exactly: constant j uses I = j * area, constant power
-    I = sqrt(P / R). Re-solves only when the conductivity or the contact changes.
-    """
-
-    def __init__(self, solver: PotentialSolver) -> None:
-        self.solver = solver
-        self._contact: ContactWeights | None = None
-        self._unit: tuple[np.ndarray, np.ndarray, float] | None = None  # V1, load1, R
-        self._version = -1  # the solver's operator version that V1 belongs to
-
-    def cached_unit_field(
-        self,
-    ) -> tuple[ContactWeights, tuple[np.ndarray, np.ndarray, float]] | None:
-        """(contact, (V1, load1, R)) of the cached unit-current field, if any."""
-        if self._unit is None or self._contact is None:
-            return None
-        return self._contact, self._unit
-
-    def restore_unit_field(
-        self, contact: ContactWeights, unit: tuple[np.ndarray, np.ndarray, float]
-    ) -> None:
-        """Seed the cache (e.g. from a checkpoint); the conductivity must already be set."""
-        self._contact, self._unit = contact, unit
-        self._version = self.solver.version
-
-    def unit_field(
-        self, sigma: np.ndarray | float, contact: ContactWeights
-    ) -> tuple[np.ndarray, np.ndarray, float, PotentialStats]:
-        """(V1, load1, R, stats): potential and load at 1 A, resistance R in ohm."""
-        self.solver.set_conductivity(sigma)
-        up_to_date = self._version == self.solver.version and same_contact(contact, self._contact)
-        if up_to_date and self._unit is not None:
-            V1, load1, R = self._unit
-            return V1, load1, R, PotentialStats(0, 0.0, 0.0, 0.0, 0.0, False, True)
-        load1 = contact.weights / contact.area_m2
-        V1, stats = self.solver.solve(load1)
-        R = delivered_power(load1, V1)
-        self._contact, self._unit = contact, (V1, load1, R)
-        self._version = self.solver.version
-        return V1, load1, R, stats
-
-    def solve(
-        self, sigma: np.ndarray | float, contact: ContactWeights, drive: ElectrodeDrive
-    ) -> PotentialSolution:
-        """The potential for ``drive`` through ``contact`` in conductivity sigma (n_tets,)."""
-        V1, load1, R, stats = self.unit_field(sigma, contact)
-        current = drive_current(drive, contact.area_m2, R)
-        return PotentialSolution(
-            V=current * V1,
-            load=current * load1,
-            current_a=current,
-            power_w=current**2 * R,
-            stats=stats,
-        )
-
-
-def drive_current(drive: ElectrodeDrive, area_m2: float, resistance_ohm: float) -> float:
-    """Injected current I in A: j * area (constant current density) or sqrt(P / R) (power)."""
-    if drive.mode == "current_density":
-        return drive.current_density_a_per_m2 * area_m2
-    if not resistance_ohm > 0:
-        raise SolverDivergedError(
-            f"potential: resistance between the electrodes is {resistance_ohm} ohm, so no current "
-            "delivers the set power (does the contact touch the return electrode?)"
-        )
-    return float(np.sqrt(drive.power_w / resistance_ohm))

@@ -37,14 +37,8 @@ from diathermy.fem.gmres import RightGMRES
 from diathermy.fem.multigrid import scaled_amg_preconditioner
 from diathermy.mesh import TetMesh
 from diathermy.physics.contact_load import ContactWeights
-from diathermy.physics.electric import (
-    DrivenPotential,
-    ElectrodeDrive,
-    PotentialSolver,
-    PotentialStats,
-    drive_current,
-    joule_heat,
-)
+from diathermy.physics.driven_potential import DrivenPotential, ElectrodeDrive, drive_current
+from diathermy.physics.electric import PotentialSolver, PotentialStats, joule_heat
 from diathermy.physics.heat_operator import HeatEnergy, heat_energy, heat_mesh, heat_rhs
 from diathermy.physics.thermal import HeatStepper, HeatStepStats
 
