@@ -223,3 +223,15 @@ def test_policy_is_the_callers():
     named = tiny_scene(mechanics={"backend": "cnn", "model": "some-registry-name:3"})
     with pytest.raises(SceneError, match=r"mechanics\.model.*no model registry"):
         Simulation(named)
+
+
+def test_nonlocal_cut_driver_runs_through_the_engine():
+    """level_set.nonlocal_length_m reaches the dissection effect: the averaged driver cuts, and
+    not what the local law cuts (the mean over 0.5 mm is not the nodal value)."""
+    from diathermy.scene import LevelSetConfig
+
+    local = Simulation(tiny_scene()).run(30)[-1].cut_volume_m3
+    averaged = Simulation(tiny_scene(level_set=LevelSetConfig(nonlocal_length_m=5e-4)))
+    cut = averaged.run(30)[-1].cut_volume_m3
+    assert cut > 0 and abs(cut / local - 1) > 0.01
+    assert averaged.scene.level_set.law(7e4).nonlocal_length_m == 5e-4
