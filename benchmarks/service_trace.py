@@ -360,6 +360,14 @@ VARIANTS = {
         "per_proc": 4,
         "plain": False,
     },
+    "placed": {
+        "what": "placed: as *now*, with the engine processes on the last CPU "
+        "(`DIATHERMY_ENGINE_CPUS`) and the server and the clients on the others",
+        "full_decode": False,
+        "per_proc": 4,
+        "plain": False,
+        "placed": True,
+    },
 }
 
 
@@ -377,7 +385,12 @@ def run_variant(
         env = {**os.environ, TRACE_ENV: str(trace_dir)}
         if v["plain"]:
             env[PLAIN_ORDER_ENV] = "1"
+        mine = os.sched_getaffinity(0)
+        engine_cpus = bench.bench_engine_cpus("auto" if v.get("placed") else "none")
+        env["DIATHERMY_ENGINE_CPUS"] = bench.format_cpus(engine_cpus)
         server = bench.Server(Path(tmp) / "data", script=Path(__file__), env=env)
+        if engine_cpus:  # the clients (forked from here) with the server
+            os.sched_setaffinity(0, mine - set(engine_cpus))
         try:
             for grid in grids:
                 out[grid] = []
@@ -397,6 +410,7 @@ def run_variant(
                             f.write(json.dumps({"variant": name, "grid": grid, **res}) + "\n")
         finally:
             server.stop()
+            os.sched_setaffinity(0, mine)
     return out
 
 
