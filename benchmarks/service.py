@@ -639,19 +639,22 @@ def write_report(
         "than the step). So the sockets' writes no longer take GIL time from the engine, and "
         "with BLAS on one thread (`DIATHERMY_BLAS_THREADS`, default 1, as `diathermy serve` "
         "sets) the engine takes one core and leaves the other to the event loop, the kernel's "
-        "copies and the clients. The frame of a step is written first to the clients whose last "
+        "copies and the clients; with `DIATHERMY_ENGINE_CPUS` (`cpus.py`) the scheduler no "
+        "longer decides that: the engine processes are pinned to their CPUs and the server "
+        "(with the clients, here) to the others, so the fan-out never takes the engine's core. "
+        "The frame of a step is written first to the clients whose last "
         "electrode control it is the first to show (`hub.py`), and the senders are woken one "
         "per turn of the event loop, so that a control that arrives while a frame goes out to "
         "16 clients is read after one write, not sixteen.",
         "",
         "CPU column: *server* is the server process (event loop, HTTP, journal), *engine* its "
         "engine processes, *clients* the benchmark's client processes. Every step moves 16 x the "
-        "frame over loopback (150 kB on 17x17x33, 1.2 MB on 33x33x65): the server's writes and "
-        "the kernel's copies share the 2 cores with the engine. *Engine waits for a CPU*: the "
-        "share of the "
+        "frame over loopback (150 kB on 17x17x33, 1.2 MB on 33x33x65): the server's writes, "
+        "the kernel's copies and the clients' reads take that much CPU besides the engine's "
+        "(on the server's CPUs when placed). *Engine waits for a CPU*: the share of the "
         "row's wall time the engine process was runnable but not running (its run-queue delay, "
         "`/proc/<pid>/schedstat`): time the other jobs, the server and the clients took from "
-        "it, which no change in the service's protocol wins back.",
+        "it (placed, only other jobs can).",
         "",
         *trace_section(),
         "## Bytes per frame",
