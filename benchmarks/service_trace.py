@@ -453,7 +453,8 @@ def main() -> None:
         "service's own share is the rows before the wait and from *frame encoded* on, and a "
         "p99 over the bound (2 x the row's step time + 20 ms) comes from steps slower than the "
         "row's median (*engine step*: the engine waiting for a CPU that the server, the clients "
-        "and other jobs take) or from the frame's trip.",
+        "and other jobs take, or, placed, its own step time varying on its own core) or from "
+        "the frame's trip.",
         "",
     ]
     for grid in grids:
