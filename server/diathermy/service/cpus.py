@@ -61,6 +61,8 @@ def check_engine_cpus(cpus: Iterable[int], allowed: set[int] | None = None) -> l
     cpus = sorted(set(cpus))
     if not cpus:
         return cpus
+    if allowed is None and not hasattr(os, "sched_setaffinity"):
+        raise ValueError("engine CPU placement needs os.sched_setaffinity (Linux)")
     allowed = allowed_cpus() if allowed is None else allowed
     missing = [c for c in cpus if c not in allowed]
     if missing:
