@@ -34,6 +34,7 @@ import httpx  # noqa: E402
 from websockets.asyncio.client import connect  # noqa: E402
 
 from benchmarks.service_client import RawStream  # noqa: E402
+from diathermy.service.cpus import format_cpus, parse_cpus  # noqa: E402
 from diathermy.service.encoding import unpack  # noqa: E402
 
 TOKEN = "bench-token"
@@ -56,6 +57,7 @@ def serve_child(args: argparse.Namespace) -> None:
 
     from diathermy.runtime import configure_threads
     from diathermy.service import Settings, create_app
+    from diathermy.service.cpus import place_server
     from diathermy.service.jsonlog import configure_logging
 
     configure_threads()  # as `diathermy serve` does: one BLAS thread per engine
@@ -70,6 +72,7 @@ def serve_child(args: argparse.Namespace) -> None:
         log_level="WARNING",
     )
     configure_logging("WARNING")
+    place_server(settings.engine_cpus)  # as `diathermy serve` does (DIATHERMY_ENGINE_CPUS)
     app = create_app(settings)
     uvicorn.run(
         app,
@@ -582,6 +585,8 @@ def write_report(
         f"{os.cpu_count()} cores shared by the server, the clients and other jobs (load average "
         f"{meta['load']}).",
         "",
+        placement_text(meta["engine_cpus"], meta["server_cpus"]),
+        "",
         "## Streaming: N clients on one session, as fast as the engine steps",
         "",
         "One client sends `run` at 1000 steps/s (more than the engine can do: the session steps "
@@ -598,7 +603,8 @@ def write_report(
         "a Python client decoding 16 x 1.2 MB per step in one process (the client before this "
         "one, `service_trace.py` replays it). "
         "CPU: cores used during the row by the server process, by its engine processes and by "
-        "the benchmark's client processes (which share the 2 cores with them). Latency: from "
+        "the benchmark's client processes (which share the cores with them; placed, the "
+        "server's). Latency: from "
         "sending an electrode control message to the first frame whose `control_id` shows it "
         "applied (the ack gives the control's id; the frame may come before the ack); every "
         "client sends one every 0.25 s, right after a frame arrives, which is the worst phase: "
@@ -634,19 +640,22 @@ def write_report(
         "than the step). So the sockets' writes no longer take GIL time from the engine, and "
         "with BLAS on one thread (`DIATHERMY_BLAS_THREADS`, default 1, as `diathermy serve` "
         "sets) the engine takes one core and leaves the other to the event loop, the kernel's "
-        "copies and the clients. The frame of a step is written first to the clients whose last "
+        "copies and the clients; with `DIATHERMY_ENGINE_CPUS` (`cpus.py`) the scheduler no "
+        "longer decides that: the engine processes are pinned to their CPUs and the server "
+        "(with the clients, here) to the others, so the fan-out never takes the engine's core. "
+        "The frame of a step is written first to the clients whose last "
         "electrode control it is the first to show (`hub.py`), and the senders are woken one "
         "per turn of the event loop, so that a control that arrives while a frame goes out to "
         "16 clients is read after one write, not sixteen.",
         "",
         "CPU column: *server* is the server process (event loop, HTTP, journal), *engine* its "
         "engine processes, *clients* the benchmark's client processes. Every step moves 16 x the "
-        "frame over loopback (150 kB on 17x17x33, 1.2 MB on 33x33x65): the server's writes and "
-        "the kernel's copies share the 2 cores with the engine. *Engine waits for a CPU*: the "
-        "share of the "
+        "frame over loopback (150 kB on 17x17x33, 1.2 MB on 33x33x65): the server's writes, "
+        "the kernel's copies and the clients' reads take that much CPU besides the engine's "
+        "(on the server's CPUs when placed). *Engine waits for a CPU*: the share of the "
         "row's wall time the engine process was runnable but not running (its run-queue delay, "
         "`/proc/<pid>/schedstat`): time the other jobs, the server and the clients took from "
-        "it, which no change in the service's protocol wins back.",
+        "it (placed, only other jobs can).",
         "",
         *trace_section(),
         "## Bytes per frame",
@@ -684,6 +693,34 @@ def write_report(
     path.write_text("\n".join(lines), encoding="utf-8")
 
 
+def bench_engine_cpus(text: str) -> list[int]:
+    """``--engine-cpus``: 'auto' is the last CPU this process may use when it may use 2 or more."""
+    if text == "none":
+        return []
+    if text == "auto":
+        cpus = sorted(os.sched_getaffinity(0))
+        return cpus[-1:] if len(cpus) >= 2 else []
+    return parse_cpus(text)
+
+
+def placement_text(engine_cpus: list[int], server_cpus: list[int]) -> str:
+    """The results' sentence on CPU placement."""
+    if not engine_cpus:
+        return (
+            "CPU placement: none (`--engine-cpus none`): the server, its engine processes and "
+            "the clients run wherever the scheduler puts them."
+        )
+    rest = format_cpus(server_cpus)
+    return (
+        f"CPU placement: `DIATHERMY_ENGINE_CPUS={format_cpus(engine_cpus)}` (`--engine-cpus`): "
+        f"the engine processes run on CPU {format_cpus(engine_cpus)}, the server process (event "
+        f"loop, worker threads, journal, the socket writes and the kernel's copies they make) on "
+        f"CPU {rest}, and the benchmark pins its own client processes to CPU {rest} too: a real "
+        "deployment's clients run on other machines, and here they would otherwise take the "
+        "engine's core."
+    )
+
+
 def trace_section() -> list[str]:
     """The latency breakdown of ``service_trace.py`` (its last results), headings demoted."""
     path = ROOT / "benchmarks" / "results" / "service_trace.md"
@@ -707,6 +744,13 @@ def main() -> None:
     p.add_argument("--reps", type=int, default=3, help="interleaved repetitions per grid")
     p.add_argument("--clients", default="1,4,16")
     p.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "service.md"))
+    p.add_argument(
+        "--engine-cpus",
+        default="auto",
+        help="the server's DIATHERMY_ENGINE_CPUS (engine processes there, the server and this "
+        "script's clients on the other CPUs); 'auto': the last CPU when there are 2 or more, "
+        "'none': no placement",
+    )
     args = p.parse_args()
     if args.cmd == "serve-child":
         serve_child(args)
@@ -714,10 +758,14 @@ def main() -> None:
     import tempfile
 
     slow_grid = [int(x) for x in args.slow_grid.split("x")]
+    engine_cpus = bench_engine_cpus(args.engine_cpus)
     load = os.getloadavg()
     tables = []
     with tempfile.TemporaryDirectory() as tmp:
-        server = Server(Path(tmp))
+        env = {**os.environ, "DIATHERMY_ENGINE_CPUS": format_cpus(engine_cpus)}
+        server = Server(Path(tmp), env=env)
+        if engine_cpus:  # the clients (forked from here) off the engines' CPUs, as the server
+            os.sched_setaffinity(0, set(os.sched_getaffinity(0)) - set(engine_cpus))
         try:
             grids = args.grids.split(",")
             seconds = [float(x) for x in args.seconds.split(",")]
@@ -741,6 +789,8 @@ def main() -> None:
         finally:
             server.stop()
     meta = {
+        "engine_cpus": engine_cpus,
+        "server_cpus": sorted(os.sched_getaffinity(0)),  # this script's, after pinning
         "seconds": args.seconds,
         "argv": " ".join(sys.argv[1:]),
         "load": " / ".join(f"{x:.1f}" for x in (*load, *os.getloadavg())),

@@ -360,6 +360,14 @@ VARIANTS = {
         "per_proc": 4,
         "plain": False,
     },
+    "placed": {
+        "what": "placed: as *now*, with the engine processes on the last CPU "
+        "(`DIATHERMY_ENGINE_CPUS`) and the server and the clients on the others",
+        "full_decode": False,
+        "per_proc": 4,
+        "plain": False,
+        "placed": True,
+    },
 }
 
 
@@ -377,7 +385,12 @@ def run_variant(
         env = {**os.environ, TRACE_ENV: str(trace_dir)}
         if v["plain"]:
             env[PLAIN_ORDER_ENV] = "1"
+        mine = os.sched_getaffinity(0)
+        engine_cpus = bench.bench_engine_cpus("auto" if v.get("placed") else "none")
+        env["DIATHERMY_ENGINE_CPUS"] = bench.format_cpus(engine_cpus)
         server = bench.Server(Path(tmp) / "data", script=Path(__file__), env=env)
+        if engine_cpus:  # the clients (forked from here) with the server
+            os.sched_setaffinity(0, mine - set(engine_cpus))
         try:
             for grid in grids:
                 out[grid] = []
@@ -397,6 +410,7 @@ def run_variant(
                             f.write(json.dumps({"variant": name, "grid": grid, **res}) + "\n")
         finally:
             server.stop()
+            os.sched_setaffinity(0, mine)
     return out
 
 
@@ -439,7 +453,8 @@ def main() -> None:
         "service's own share is the rows before the wait and from *frame encoded* on, and a "
         "p99 over the bound (2 x the row's step time + 20 ms) comes from steps slower than the "
         "row's median (*engine step*: the engine waiting for a CPU that the server, the clients "
-        "and other jobs take) or from the frame's trip.",
+        "and other jobs take, or, placed, its own step time varying on its own core) or from "
+        "the frame's trip.",
         "",
     ]
     for grid in grids:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 from pathlib import Path
 from typing import Any
@@ -13,6 +14,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     from pydantic import ValidationError
 
     from diathermy.service.config import Settings
+    from diathermy.service.cpus import format_cpus, place_server
     from diathermy.service.jsonlog import configure_logging
     from diathermy.service.main import create_app
 
@@ -23,6 +25,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
             "port": args.port,
             "data_dir": args.data_dir,
             "token_file": args.token_file,
+            "engine_cpus": args.engine_cpus,
         }.items()
         if v is not None
     }
@@ -33,8 +36,20 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         if args.token:
             settings = settings.model_copy(update={"tokens": [*settings.tokens, *args.token]})
         configure_logging(settings.log_level)
+        kept = place_server(settings.engine_cpus)
+        if kept is not None:
+            logging.getLogger("diathermy.service").info(
+                "cpu placement",
+                extra={
+                    "engine_cpus": format_cpus(settings.engine_cpus),
+                    "server_cpus": format_cpus(kept),
+                },
+            )
         app = create_app(settings)
-    except (ValidationError, ValueError, OSError) as err:
+    except ValidationError as err:
+        print(f"diathermy: error: {one_line(err)}", file=sys.stderr)
+        return 2
+    except (ValueError, OSError) as err:
         print(f"diathermy: error: {err}", file=sys.stderr)
         return 2
     uvicorn.run(
@@ -48,6 +63,13 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         access_log=False,
     )
     return 0
+
+
+def one_line(err: Any) -> str:
+    """A pydantic ValidationError as one line: ``field: message; ...``."""
+    return "; ".join(
+        f"{'.'.join(str(x) for x in e['loc']) or 'settings'}: {e['msg']}" for e in err.errors()
+    )
 
 
 def _cmd_openapi(args: argparse.Namespace) -> int:
@@ -70,6 +92,12 @@ def add_serve_parser(subparsers: Any) -> None:
     s.add_argument("--token-file", type=Path, help="file of tokens or sha256:<hex>, one a line")
     s.add_argument(
         "--no-auth", action="store_true", help="serve without authentication (warns at start)"
+    )
+    s.add_argument(
+        "--engine-cpus",
+        metavar="LIST",
+        help="run the engine processes on these CPUs ('1', '2-3,6') and the server on the "
+        "others (DIATHERMY_ENGINE_CPUS; default: no placement)",
     )
     s.set_defaults(func=_cmd_serve)
 

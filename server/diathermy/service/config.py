@@ -8,6 +8,8 @@ from typing import Annotated
 from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
+from diathermy.service.cpus import check_engine_cpus, parse_cpus
+
 
 class Settings(BaseSettings):
     """Everything the server can be told; the CLI overrides what it is given on top of these."""
@@ -47,6 +49,11 @@ class Settings(BaseSettings):
         description="fsync the session journal after every command: survives power loss too, "
         "not only a killed process, at the cost of one disk sync per step",
     )
+    engine_cpus: Annotated[list[int], NoDecode] = Field(
+        default_factory=list,
+        description="CPUs the engine processes run on, as taskset -c takes them ('1', '2-3,6'); "
+        "the server process runs on the others it may use. Empty (the default): no placement",
+    )
     log_level: str = "INFO"
 
     @field_validator("tokens", mode="before")
@@ -55,3 +62,13 @@ class Settings(BaseSettings):
         if isinstance(value, str):
             return [t.strip() for t in value.split(",") if t.strip()]
         return value
+
+    @field_validator("engine_cpus", mode="before")
+    @classmethod
+    def _cpu_list(cls, value: object) -> object:
+        return parse_cpus(value) if isinstance(value, str) else value
+
+    @field_validator("engine_cpus")
+    @classmethod
+    def _cpus_available(cls, value: list[int]) -> list[int]:
+        return check_engine_cpus(value)

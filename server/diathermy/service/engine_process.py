@@ -42,6 +42,7 @@ from multiprocessing.connection import Connection
 from multiprocessing.context import BaseContext
 from typing import Any
 
+from diathermy.service.cpus import place_engine
 from diathermy.service.exceptions import EngineProcessError
 
 PRELOAD = ["diathermy.service.engine_ops"]
@@ -85,14 +86,15 @@ def _context() -> BaseContext:
 class RemoteSim:
     """The server's handle on one engine process (see the module docstring)."""
 
-    def __init__(self, label: str) -> None:
+    def __init__(self, label: str, cpus: list[int] | None = None) -> None:
         self.label = label
+        self.cpus = list(cpus or [])  # the engine process pins itself to these (cpus.py)
         ctx = _context()
         self._conn, child = ctx.Pipe()  # a socket pair
         _widen(self._conn)
         self._reader = ReplyReader(self._conn)
         self._proc = ctx.Process(  # type: ignore[attr-defined]
-            target=serve, args=(child,), name=f"diathermy-engine-{label}", daemon=True
+            target=serve, args=(child, self.cpus), name=f"diathermy-engine-{label}", daemon=True
         )
         self._proc.start()
         child.close()
@@ -266,10 +268,12 @@ def _status(sim: Any) -> SimStatus | None:
     )
 
 
-def serve(conn: Connection) -> None:
-    """The engine process: run ops on its simulation until the pipe closes or says stop."""
+def serve(conn: Connection, cpus: list[int] | None = None) -> None:
+    """The engine process: run ops on its simulation until the pipe closes or says stop; on
+    ``cpus`` when given (before it starts any thread, so that they all run there)."""
     from diathermy.runtime import configure_threads
 
+    place_engine(cpus or [])
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the server, which saves via us
     configure_threads()
     _widen(conn)

@@ -56,6 +56,7 @@ def create_app(settings: Settings | None = None, *, engine: EngineAdapter | None
             settings.data_dir,
             engine or DefaultEngine(settings.data_dir),
             fsync=settings.journal_fsync,
+            engine_cpus=settings.engine_cpus,
         ),
         metrics=ServiceMetrics(),
     )

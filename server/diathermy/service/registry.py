@@ -120,10 +120,18 @@ class SessionRecord:
 class SessionRegistry:
     """All sessions, keyed by id; lookups are by (owner, id) so other owners see nothing."""
 
-    def __init__(self, data_dir: Path, engine: EngineAdapter, *, fsync: bool = False) -> None:
+    def __init__(
+        self,
+        data_dir: Path,
+        engine: EngineAdapter,
+        *,
+        fsync: bool = False,
+        engine_cpus: list[int] | None = None,
+    ) -> None:
         self.root = Path(data_dir) / "sessions"
         self.engine = engine
         self.fsync = fsync
+        self.engine_cpus = list(engine_cpus or [])  # each engine process runs on these
         self.sessions: dict[str, SessionRecord] = {}
 
     def scan(self) -> int:
@@ -163,7 +171,7 @@ class SessionRegistry:
         """Build a simulation of ``scene`` in a new engine process, register and checkpoint it
         (worker thread)."""
         sid = uuid.uuid4().hex[:16]
-        sim = RemoteSim(sid)
+        sim = RemoteSim(sid, cpus=self.engine_cpus)
         try:
             sim.call(ops.create, self.engine, scene)
             directory = self.root / sid
@@ -191,7 +199,7 @@ class SessionRegistry:
             seq, _, _ = checkpoint_seq(rec.state_path)
             journal = Journal(rec.journal_path, seq=seq, fsync=self.fsync)
             entries = journal.entries(after=seq)
-            sim = RemoteSim(rec.id)
+            sim = RemoteSim(rec.id, cpus=self.engine_cpus)
             try:
                 sim.call(ops.load, self.engine, rec.state_path)
                 steps = sim.call(replay, entries)
