@@ -1,6 +1,6 @@
 """Real time (issue #25): what a cutting step costs, full against incremental, one command.
 
-    python benchmarks/realtime.py run [--scenes NAME ...] [--grids own uniform] [--steps N]
+    python benchmarks/realtime.py run [--scenes NAME ...] [--grids own uniform] [--steps N] [--tight]
     python benchmarks/realtime.py profile [--scenes default] [--grids own uniform] [--steps N]
     python benchmarks/realtime.py solvers [--grids 0 0.5] [--steps N] [--rounds N]
 
@@ -13,7 +13,8 @@ turn, so that other load on a shared machine hits them alike): ``full`` (``solve
 false: every effect solved in full every step, the reference), ``incremental`` (the default:
 the mechanics from the previous displacement, Ritz-scaled, patch-corrected, a full solve when
 the residual check or the interval asks for it) and, on the uniform grid that has a shipped
-model, ``cnn`` (the CNN predictor with its patch). Per mode: median and p90 wall time per step,
+model, ``cnn`` (the CNN predictor with its patch); with ``--tight`` also the incremental mode as
+it was before 2026-12-03 (``TIGHT_MODE``: the polish to 1e-3 with degree-3 V-cycles). Per mode: median and p90 wall time per step,
 the real-time factor (dt / median wall), the median time of each effect, the mechanics' share
 of local steps, and against ``full`` at the same step the max and mean strain-energy error and
 the max temperature error, and the final cut-volume difference. Writes
@@ -173,19 +174,42 @@ MODES: dict[str, dict[str, Any]] = {
     "incremental": {},
     "cnn": {"backend": "cnn"},
 }
+TIGHT_MODE = "incremental 1e-3 deg3"
+"""``--tight``: the incremental mode as it was before 2026-12-03, beside today's default: the
+polish to an energy-error estimate of 1e-3 (now 3e-3) with Chebyshev degree-3 V-cycles (now 1)."""
+TIGHT: dict[str, Any] = {"energy_tolerance": 1e-3, "polish_iterations": 10, "amg_degree": 3}
 EFFECTS = ("electric", "thermal", "vaporization", "mechanics", "dissection")
 
 
-def modes_for(scene: Scene) -> list[str]:
-    """The modes that apply: the CNN only with mechanics on a grid with a shipped model."""
-    cnn = "mechanics" in scene.closed_effects and scene.resolution is None
-    cnn = cnn and tuple(scene.grid) == UNIFORM
-    return [m for m in MODES if m != "cnn" or cnn]
+def modes_for(scene: Scene, tight: bool = False) -> list[str]:
+    """The modes that apply: the CNN only with mechanics on a grid with a shipped model;
+    ``tight``: also ``TIGHT_MODE`` where the scene has mechanics."""
+    mech = "mechanics" in scene.closed_effects
+    cnn = mech and scene.resolution is None and tuple(scene.grid) == UNIFORM
+    return [m for m in MODES if m != "cnn" or cnn] + ([TIGHT_MODE] if tight and mech else [])
+
+
+def load_mode(path: Path, mode: str) -> Simulation:
+    """The checkpoint continued in ``mode`` (a ``MODES`` key or ``TIGHT_MODE``)."""
+    settings = dict(TIGHT if mode == TIGHT_MODE else MODES[mode])
+    degree = settings.pop("amg_degree", None)
+    sim = load_as(path, **settings)
+    if degree is not None:  # the mechanics hierarchy with other Chebyshev smoothers, built anew
+        backend = fem_of(sim.ctx.mechanics)
+        assert backend is not None
+        cheb = ("chebyshev", {"degree": degree})
+        backend.krylov.amg_options = {
+            **DEFAULT_AMG_OPTIONS,
+            "presmoother": cheb,
+            "postsmoother": cheb,
+        }
+        backend.krylov.reuse = type(backend.krylov.reuse)(rebuild_due=True)
+    return sim
 
 
 def run_modes(path: Path, modes: list[str], steps: int) -> dict[str, dict[str, list[float]]]:
     """Every mode from the checkpoint, stepped in lockstep; per mode the per-step records."""
-    sims = {m: load_as(path, **dict(MODES[m])) for m in modes}
+    sims = {m: load_mode(path, m) for m in modes}
     keys = ("wall_s", "se_err", "dT_k", "local", "cut_m3", *EFFECTS)
     rec: dict[str, dict[str, list[float]]] = {m: {k: [] for k in keys} for m in modes}
     for _ in range(steps):
@@ -218,7 +242,8 @@ def write_run(runs: dict, a: argparse.Namespace, started: str, out: Path = RESUL
         "# Real time: a cutting step, full against incremental",
         "",
         f"`python benchmarks/realtime.py run --scenes {' '.join(a.scenes)} --grids "
-        f"{' '.join(a.grids)} --steps {a.steps}` (started {started}): each scene from its "
+        f"{' '.join(a.grids)} --steps {a.steps}{' --tight' if a.tight else ''}` (started "
+        f"{started}): each scene from its "
         "checkpoint two steps after the first cut (or after the warm-up where it does not cut), "
         f"{a.steps} steps per mode, the modes stepped in lockstep; every measured step is in the "
         "cutting phase where the scene cuts. A 2-core machine that other jobs may share (load "
@@ -279,11 +304,13 @@ def plot_run(runs: dict, out: Path) -> None:
     plt.close(fig)
 
 
-def measure(scene: Scene, path: Path, *, warmup: int, steps: int) -> dict[str, Any]:
+def measure(
+    scene: Scene, path: Path, *, warmup: int, steps: int, tight: bool = False
+) -> dict[str, Any]:
     """``scene`` warmed up (checkpoint ``path``), then every mode that applies in lockstep."""
     path, first_cut = warm_up(scene, path, warmup)
     return {
-        "rec": run_modes(path, modes_for(scene), steps),
+        "rec": run_modes(path, modes_for(scene, tight), steps),
         "dt_s": scene.dt_s,
         "first_cut": first_cut,
         "nodes": int(np.prod(scene.node_shape)),
@@ -355,6 +382,11 @@ def main() -> None:
         r.add_argument("--warmup", type=int, default=60, help="steps at most before the cut")
         r.add_argument("--top", type=int, default=15, help="profile: functions listed")
         r.add_argument("--out", type=Path, default=RESULTS, help="run: results folder")
+        r.add_argument(
+            "--tight",
+            action="store_true",
+            help=f"run: also '{TIGHT_MODE}', the incremental mode's settings before 2026-12-03",
+        )
     s = sub.add_parser("solvers", help="per-saving cost of a cutting step")
     s.add_argument("--grids", nargs="+", type=float, default=[0.0, 0.5], help="0: uniform")
     s.add_argument("--steps", type=int, default=6)
@@ -363,7 +395,13 @@ def main() -> None:
     started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     if a.cmd == "run":
         runs = {
-            (n, g): measure(scene_on(n, g), CACHE / f"{n}_{g}.h5", warmup=a.warmup, steps=a.steps)
+            (n, g): measure(
+                scene_on(n, g),
+                CACHE / f"{n}_{g}.h5",
+                warmup=a.warmup,
+                steps=a.steps,
+                tight=a.tight,
+            )
             for n in a.scenes
             for g in a.grids
         }

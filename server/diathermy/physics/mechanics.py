@@ -41,7 +41,11 @@ from diathermy.mesh import TetMesh
 from diathermy.physics.constraints import Constraints, clamped_bottom
 from diathermy.physics.fragments import Fragments, find_fragments, update_fragments
 
-_CHEBYSHEV = ("chebyshev", {"degree": 3})
+_CHEBYSHEV = ("chebyshev", {"degree": 1})
+"""Degree 1: a V-cycle of about 4 fine-level mat-vecs against 8 with degree 3. A full solve takes
+about twice the CG iterations at the same or lower cost; the incremental mode's polish, a few
+iterations from a close start each step, costs 30-45 % less per step on the graded grids
+(docs/realtime.md, 2026-12-03)."""
 DEFAULT_AMG_OPTIONS: dict[str, Any] = {
     "presmoother": _CHEBYSHEV,
     "postsmoother": _CHEBYSHEV,

@@ -181,12 +181,12 @@ class MechanicsConfig(_Model):
         "uniform grids",
     )
     energy_tolerance: Annotated[float, Field(gt=0, lt=1)] = Field(
-        1e-3,
+        3e-3,
         description="fem, incremental: relative energy-norm error estimate sqrt(r.Mr)/||u||_K "
         "a polished answer must reach",
     )
     polish_iterations: Annotated[int, Field(ge=0, le=100)] = Field(
-        10,
+        20,
         description="fem, incremental: PCG iterations with the kept hierarchy before the step "
         "is solved in full (0: no polish)",
     )
