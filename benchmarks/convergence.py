@@ -550,34 +550,76 @@ def _drilling_lines(runs: dict[str, dict[str, np.ndarray]], keys: list[str]) -> 
 
 
 def _variant_lines(runs: dict[str, dict[str, np.ndarray]], keys: list[str]) -> list[str]:
-    """The non-local driver's runs beside the local-law run on the same grid."""
+    """The model variants' runs beside the local-law, flat-contact run on the same grid, at
+    every simulated time that the variants reached in common (the shortest run's end first),
+    and the draped contact's own ladder against its finest run."""
     if not keys:
         return []
-    t_cmp = min(float(runs[k]["time_s"][-1]) for k in keys)
+    ends = sorted({round(float(runs[k]["time_s"][-1]), 6) for k in keys})
     lines = [
         "",
-        f"Model variants against the shipped model on the same grid, at t = {t_cmp:.2f} s: the "
-        "non-local cut driver (`level_set.nonlocal_length_m` = l; W averaged over l before it "
-        "drives the front) and the draped contact (`electrodes[].contact` = draped: the disk "
-        "follows the crater's surface under each of its points):",
+        "Model variants against the shipped model on the same grid: the non-local cut driver "
+        "(`level_set.nonlocal_length_m` = l; W averaged over l before it drives the front) and "
+        "the draped contact (`electrodes[].contact` = draped: the disk follows the crater's "
+        "surface under each of its points). Compared at each run's end that the others reach "
+        "too; a run that stopped earlier (its wall limit) shows -.",
         "",
-        "| grid | l mm | contact | first cut interp. s | cut mm^3 | depth mm | cut / shipped "
-        "| deepening rate mm/s |",
-        "|---|---:|---|---:|---:|---:|---:|---:|",
+        "| grid | l mm | contact | t end s | first cut interp. s | "
+        + " | ".join(f"cut {t:.2f} s mm^3 | depth {t:.2f} s mm | / shipped" for t in ends)
+        + " | deepening rate mm/s |",
+        "|---|---:|---|---:|---:|" + "---:|---:|---:|" * len(ends) + "---:|",
     ]
     for k in keys:
         d = runs[k]
         base = runs.get(f"fixed_{float(d['fine_mm']):g}mm")
-        cut = _at(d["time_s"], d["cut_m3"], t_cmp)
-        ref = _at(base["time_s"], base["cut_m3"], t_cmp) if base is not None else math.nan
         s = summary(d)
+        cells = []
+        for t in ends:
+            if float(d["time_s"][-1]) < t - 1e-6:
+                cells.append("- | - | -")
+                continue
+            cut = _at(d["time_s"], d["cut_m3"], t)
+            ref = _at(base["time_s"], base["cut_m3"], t) if base is not None else math.nan
+            cells.append(
+                f"{_fmt(cut, 1e9)} | {_fmt(_at(d['time_s'], d['depth_m'], t), 1e3)} | "
+                f"{_fmt(cut / ref if ref else math.nan, 1.0, 3)}"
+            )
         lines.append(
             f"| {float(d['fine_mm']):g} mm | {_length_mm(d):g} | {_contact(d)} | "
-            f"{_fmt(s['cut_interp'], 1.0, 3)} "
-            f"| {_fmt(cut, 1e9)} | {_fmt(_at(d['time_s'], d['depth_m'], t_cmp), 1e3)} | "
-            f"{_fmt(cut / ref if ref else math.nan, 1.0, 3)} | {_fmt(drilling_rate(d), 1e3)} |"
+            f"{float(d['time_s'][-1]):.2f} | {_fmt(s['cut_interp'], 1.0, 3)} | "
+            + " | ".join(cells)
+            + f" | {_fmt(drilling_rate(d), 1e3)} |"
         )
-    return lines
+    return lines + _ladder_lines(runs, keys)
+
+
+def _ladder_lines(runs: dict[str, dict[str, np.ndarray]], keys: list[str]) -> list[str]:
+    """Each contact's coarser grids against its finest, at the time the finest draped run
+    reached (the flat ladder at the same time, for comparison)."""
+    draped = [k for k in keys if _contact(runs[k]) == "draped" and _length_mm(runs[k]) == 0.0]
+    if len(draped) < 2:
+        return []
+    finest = min(draped, key=lambda k: float(runs[k]["fine_mm"]))
+    t = float(runs[finest]["time_s"][-1])
+    out = []
+    for contact, ks in (("draped", draped), ("flat", [k.removesuffix("_draped") for k in draped])):
+        ks = [k for k in ks if k in runs and float(runs[k]["time_s"][-1]) >= t - 1e-6]
+        if len(ks) < 2:
+            continue
+        top = min(ks, key=lambda k: float(runs[k]["fine_mm"]))
+        ref = _at(runs[top]["time_s"], runs[top]["cut_m3"], t)
+        ref_d = _at(runs[top]["time_s"], runs[top]["depth_m"], t)
+        parts = [
+            f"{float(runs[k]['fine_mm']):g} mm {_at(runs[k]['time_s'], runs[k]['cut_m3'], t) / ref:.2f}"
+            f" / {_at(runs[k]['time_s'], runs[k]['depth_m'], t) / ref_d:.2f}"
+            for k in sorted(ks, key=lambda k: -float(runs[k]["fine_mm"]))
+            if k != top
+        ]
+        out.append(
+            f"- {contact} contact at t = {t:.2f} s, cut volume / depth against its "
+            f"{float(runs[top]['fine_mm']):g} mm run: " + ", ".join(parts) + "."
+        )
+    return ["", *out] if out else []
 
 
 def report() -> None:
