@@ -81,3 +81,39 @@ def test_nonlocal_run_and_probe_then_report(bench: ModuleType, tmp_path: Path, m
     text = (tmp_path / "convergence.md").read_text()
     assert "| 4 mm | 2 | flat |" in text  # the variants' table
     assert "4mm_l2 (" not in text  # not a row of the ladder
+
+
+def test_ladder_compares_each_contact_at_the_finest_draped_end(
+    bench: ModuleType, monkeypatch
+) -> None:
+    """The draped ladder and the flat one at the time the finest draped run reached, each
+    against its own finest run; a run that stopped earlier shows - in the variants' table."""
+    monkeypatch.setattr(bench, "summary", lambda d: {"cut_interp": 0.05})
+    t_long, t_short = np.arange(1, 11) * 0.1, np.arange(1, 6) * 0.1
+
+    def run(fine: float, scale: float, t: np.ndarray, contact: str) -> dict[str, np.ndarray]:
+        return {
+            "time_s": t,
+            "cut_m3": scale * t * 1e-9,
+            "depth_m": scale * t * 1e-3,
+            "fine_mm": np.array(fine),
+            "contact": np.array(contact),
+        }
+
+    runs = {
+        "fixed_0.4mm": run(0.4, 0.8, t_long, "flat"),
+        "fixed_0.2mm": run(0.2, 1.0, t_long, "flat"),
+        "fixed_0.4mm_draped": run(0.4, 0.9, t_long, "draped"),
+        "fixed_0.2mm_draped": run(0.2, 1.0, t_short, "draped"),
+    }
+    text = "\n".join(bench._variant_lines(runs, ["fixed_0.4mm_draped", "fixed_0.2mm_draped"]))
+    assert "cut 0.50 s mm^3" in text and "cut 1.00 s mm^3" in text
+    assert "| 0.2 mm | 0 | draped | 0.50 |" in text and "| - | - | - |" in text
+    assert (
+        "draped contact at t = 0.50 s, cut volume / depth against its 0.2 mm run: 0.4 mm 0.90 / 0.90"
+        in text
+    )
+    assert (
+        "flat contact at t = 0.50 s, cut volume / depth against its 0.2 mm run: 0.4 mm 0.80 / 0.80"
+        in text
+    )
