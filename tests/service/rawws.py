@@ -30,10 +30,13 @@ class RawWebSocket:
             raise ConnectionError(head.decode(errors="replace"))
 
     def send_text(self, text: str) -> None:
-        payload = text.encode()
+        self._send(0x1, text.encode())
+
+    def _send(self, opcode: int, payload: bytes) -> None:
+        """One masked frame (a client must mask) with FIN set."""
         mask = os.urandom(4)
         n = len(payload)
-        hdr = bytes([0x81]) + (
+        hdr = bytes([0x80 | opcode]) + (
             bytes([0x80 | n]) if n < 126 else bytes([0x80 | 126]) + struct.pack("!H", n)
         )
         masked = bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
@@ -48,19 +51,33 @@ class RawWebSocket:
             buf += chunk
         return bytes(buf)
 
-    def recv(self, timeout: float = 5.0) -> dict[str, Any]:
-        """The next data message (msgpack) from the server; raises TimeoutError when none comes."""
-        self.sock.settimeout(timeout)
+    def _frame(self) -> tuple[bool, int, bytes]:
+        """The next frame: (FIN, opcode, payload)."""
         b0, b1 = self._exact(2)
         n = b1 & 0x7F
         if n == 126:
             n = struct.unpack("!H", self._exact(2))[0]
         elif n == 127:
             n = struct.unpack("!Q", self._exact(8))[0]
-        payload = self._exact(n)
-        if b0 & 0x0F == 0x8:
-            raise ConnectionError(f"closed: {payload[:2].hex()} {payload[2:].decode()}")
-        return unpack(payload)
+        return bool(b0 & 0x80), b0 & 0x0F, self._exact(n)
+
+    def recv(self, timeout: float = 5.0) -> dict[str, Any]:
+        """The next data message (msgpack) from the server, its fragments joined; pings are
+        answered and pongs skipped; raises TimeoutError when none comes."""
+        self.sock.settimeout(timeout)
+        parts: list[bytes] = []
+        while True:
+            fin, opcode, payload = self._frame()
+            if opcode == 0x8:
+                raise ConnectionError(f"closed: {payload[:2].hex()} {payload[2:].decode()}")
+            if opcode == 0x9:
+                self._send(0xA, payload)
+                continue
+            if opcode == 0xA:
+                continue
+            parts.append(payload)
+            if fin:
+                return unpack(b"".join(parts))
 
     def close(self) -> None:
         self.sock.close()
