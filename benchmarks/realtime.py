@@ -93,10 +93,16 @@ def checkpoint(fine_mm: float) -> Path:
 
 def warm_up(scene: Scene, path: Path, warmup: int) -> tuple[Path, int | None]:
     """``scene`` stepped to two steps after its first cut, or ``warmup`` steps if it has not cut
-    by then, checkpointed at ``path`` (reused when it exists); (path, first cut step or None)."""
+    by then, checkpointed at ``path`` (reused when it exists for the same scene, settings
+    included); (path, first cut step or None)."""
     meta = path.with_suffix(".json")
+    scene_json = scene.model_dump_json()
     if path.exists() and meta.exists():
-        return path, json.loads(meta.read_text())["first_cut_step"]
+        cached = json.loads(meta.read_text())
+        # a checkpoint carries its scene's settings: one warmed up under other defaults would
+        # run the 'incremental' mode with those, so it is warmed up again
+        if cached.get("scene") == scene_json:
+            return path, cached["first_cut_step"]
     path.parent.mkdir(parents=True, exist_ok=True)
     sim = Simulation(scene)
     after_cut: int | None = None
@@ -108,7 +114,7 @@ def warm_up(scene: Scene, path: Path, warmup: int) -> tuple[Path, int | None]:
             after_cut = sim.step_index
         print(f"  {scene.name} warm-up step {r.step}: {r.wall_s:.2f} s", flush=True)
     sim.save_checkpoint(path)
-    meta.write_text(json.dumps({"first_cut_step": after_cut}))
+    meta.write_text(json.dumps({"first_cut_step": after_cut, "scene": scene_json}))
     return path, after_cut
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import json
 import sys
 from pathlib import Path
 from types import ModuleType
@@ -40,6 +41,14 @@ def test_tiny_run_writes_its_table(bench: ModuleType, tmp_path: Path) -> None:
     assert rec["full"]["cut_m3"][-1] > 0 and all(t > 0 for t in rec["full"]["mechanics"])
     # the cached checkpoint is reused, with its first-cut step
     assert bench.warm_up(scene, tmp_path / "tiny.h5", 40)[1] == run["first_cut"]
+    # ... but not for a scene with other settings: a checkpoint carries its scene's
+    data = scene.model_dump()
+    data["mechanics"]["energy_tolerance"] = 5e-3
+    other = type(scene).model_validate(data)
+    mtime = (tmp_path / "tiny.h5").stat().st_mtime_ns
+    bench.warm_up(other, tmp_path / "tiny.h5", 40)
+    assert (tmp_path / "tiny.h5").stat().st_mtime_ns != mtime
+    assert json.loads((tmp_path / "tiny.json").read_text())["scene"] == other.model_dump_json()
     args = argparse.Namespace(scenes=["tiny"], grids=["own"], steps=4, tight=True)
     bench.write_run({("tiny", "own"): run}, args, "now", out=tmp_path)
     table = (tmp_path / "realtime.md").read_text()
