@@ -48,3 +48,13 @@ def test_patch_rounds_lower_the_residual_and_stop_at_the_guard():
     met = _local(solver, u1, p2, graph, loose)
     assert met.residual == one.residual and np.array_equal(met.patch_nodes, one.patch_nodes)
     np.testing.assert_array_equal(met.u, one.u)
+
+
+def test_scene_defaults_are_the_solver_defaults():
+    """The scene model states the incremental knobs' defaults; they are the solver's own."""
+    from diathermy.physics.local_solve import IncrementalSettings
+    from diathermy.scene.models import MechanicsConfig
+
+    cfg, settings = MechanicsConfig(), IncrementalSettings()
+    assert cfg.energy_tolerance == settings.energy_tolerance
+    assert cfg.polish_iterations == settings.polish_iterations
