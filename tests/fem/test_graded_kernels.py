@@ -9,11 +9,12 @@ import scipy.sparse.linalg as spla
 
 from diathermy.fem.edges import edge_stiffness, laplacian_pattern
 from diathermy.fem.elastic import ElasticAssembler, elastic_assembler
-from diathermy.fem.geometry import element_geometry, structured_geometry
-from diathermy.fem.scalar import assemble_diffusion, volume_load
+from diathermy.fem.geometry import element_geometry, gradient, gradient_matrix, structured_geometry
+from diathermy.fem.scalar import assemble_diffusion, volume_load, volume_load_matrix
 from diathermy.fem.sparsity import build_pattern
 from diathermy.mesh import Grid, TetMesh, build_tet_mesh
 from diathermy.mesh.grading import graded_axis
+from diathermy.physics.properties import nodes_to_tets
 
 
 @pytest.fixture(scope="module")
@@ -32,6 +33,29 @@ def test_graded_geometry_equals_element_loop(graded_mesh):
     scale = np.abs(slow.grads).max()
     assert np.allclose(fast.grads, slow.grads, rtol=1e-10, atol=1e-12 * scale)
     assert len(np.unique(np.round(fast.volumes, 20))) > 6  # really graded
+
+
+@pytest.mark.parametrize("graded", [True, False])
+def test_tet_operators_as_matrices_equal_their_element_formulas(graded, graded_mesh, small_mesh):
+    """The gradient, the volume load and the tet mean as reusable sparse products give the
+    element formulas' numbers; a Kuhn tet's gradient holds 6 entries (2 nodes per axis)."""
+    m = graded_mesh if graded else small_mesh
+    geom = structured_geometry(m.points, m.tets, m.shape_id)
+    rng = np.random.default_rng(3)
+    u, q = rng.standard_normal(m.n_nodes), rng.standard_normal(m.n_tets)
+    G = gradient_matrix(geom, m.tets, m.n_nodes)
+    assert G.shape == (3 * m.n_tets, m.n_nodes) and G.nnz == 6 * m.n_tets
+    ref = np.einsum("ea,eak->ek", u[m.tets], geom.grads)
+    scale = np.abs(ref).max()
+    assert np.allclose((G @ u).reshape(-1, 3), ref, rtol=0, atol=1e-13 * scale)
+    assert np.allclose(gradient(geom, m.tets, u), ref, rtol=0, atol=1e-13 * scale)
+    by_bincount = np.bincount(m.tets.ravel(), np.repeat(q * geom.volumes / 4, 4), m.n_nodes)
+    load = volume_load_matrix(geom, m.tets, m.n_nodes) @ q
+    assert np.allclose(load, by_bincount, rtol=0, atol=1e-14 * np.abs(by_bincount).max())
+    assert np.allclose(volume_load(geom, m.tets, m.n_nodes, q), load, rtol=0, atol=0)
+    assert np.allclose(nodes_to_tets(u, m.tets), u[m.tets].mean(axis=1), rtol=0, atol=1e-15)
+    vec = rng.standard_normal((m.n_nodes, 3))
+    assert np.array_equal(nodes_to_tets(vec, m.tets), vec[m.tets].mean(axis=1))
 
 
 def test_uniform_geometry_is_bit_identical_to_the_translate_gather(small_mesh):

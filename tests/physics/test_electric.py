@@ -7,7 +7,7 @@ import pytest
 
 from diathermy.errors import SceneError
 from diathermy.fem.edges import edge_stiffness
-from diathermy.fem.geometry import element_geometry, structured_geometry
+from diathermy.fem.geometry import element_geometry, gradient_matrix, structured_geometry
 from diathermy.fem.scalar import surface_load, volume_load
 from diathermy.mesh import Grid, TetMesh, build_tet_mesh
 from diathermy.physics.contact_load import contact_weights, disk_quadrature
@@ -87,7 +87,7 @@ def test_joule_heat_matches_reference_loop(small_mesh, rng):
     geom = element_geometry(small_mesh.points, small_mesh.tets)
     V = rng.normal(size=small_mesh.n_nodes)
     sigma = rng.uniform(0.1, 1.0, small_mesh.n_tets)
-    q = joule_heat(geom.grads, small_mesh.tets, sigma, V)
+    q = joule_heat(gradient_matrix(geom, small_mesh.tets, small_mesh.n_nodes), sigma, V)
     for e in rng.choice(small_mesh.n_tets, 10, replace=False):
         tet = small_mesh.tets[e]
         C = np.linalg.inv(np.column_stack([np.ones(4), small_mesh.points[tet]]))
@@ -104,7 +104,7 @@ def test_joule_heat_equals_delivered_power(paper_meshes):
         sol = DrivenPotential(solver).solve(
             sigma, contact_weights(mesh, PAPER_CENTER, A_M), ElectrodeDrive()
         )
-        q = joule_heat(geom.grads, mesh.tets, sigma, sol.V)
+        q = joule_heat(gradient_matrix(geom, mesh.tets, mesh.n_nodes), sigma, sol.V)
         assert np.dot(q, geom.volumes) == pytest.approx(sol.power_w, rel=1e-6)
         assert sol.power_w == pytest.approx(delivered_power(sol.load, sol.V), rel=1e-14)
         assert sol.current_a == pytest.approx(J0 * np.pi * A_M**2, rel=1e-10)
@@ -117,7 +117,9 @@ def test_constant_power_hits_its_target(paper_meshes):
     contact = contact_weights(mesh, PAPER_CENTER, A_M)
     for target in (50.0, 5.0):
         sol = driven.solve(SIGMA, contact, ElectrodeDrive(mode="power", power_w=target))
-        q = joule_heat(geom.grads, mesh.tets, np.full(mesh.n_tets, SIGMA), sol.V)
+        q = joule_heat(
+            gradient_matrix(geom, mesh.tets, mesh.n_nodes), np.full(mesh.n_tets, SIGMA), sol.V
+        )
         assert sol.power_w == pytest.approx(target, rel=1e-12)
         assert np.dot(q, geom.volumes) == pytest.approx(target, rel=1e-6)
     assert solver.krylov.n_solves == 1  # one unit-current solve serves both targets

@@ -65,7 +65,12 @@ class EngineContext:
         )
         # the paper's monolithic option shares the potential and heat solvers above
         self.coupled = ElectroThermal(
-            mesh, geom, stiffness=stiffness, potential=self.potential, heat=self.heat
+            mesh,
+            geom,
+            stiffness=stiffness,
+            potential=self.potential,
+            heat=self.heat,
+            gradient_op=self.disc.gradient,
         )
         self.conductivity_law = ConductivityLaw()
         self.damage_law = ArrheniusDamage()

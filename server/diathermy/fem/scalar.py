@@ -78,6 +78,18 @@ def surface_load(
     return np.bincount(tris.ravel(), np.repeat(w / 3.0, 3), minlength=n_nodes)
 
 
+def volume_load_matrix(geom: ElementGeometry, tets: np.ndarray, n_nodes: int) -> sp.csr_matrix:
+    """The nodal load of a per-tet constant source as a matrix (n_nodes, n_tets):
+    int_T q N_a = q |T| / 4, so ``M @ q`` is ``volume_load``; reused, one product costs about a
+    third of the bincount."""
+    n_t = tets.shape[0]
+    by_tet = sp.csr_matrix(
+        (np.repeat(geom.volumes / 4.0, 4), tets.ravel(), 4 * np.arange(n_t + 1)),
+        shape=(n_t, n_nodes),
+    )
+    return by_tet.T.tocsr()
+
+
 def volume_load(geom: ElementGeometry, tets: np.ndarray, n_nodes: int, q: np.ndarray) -> np.ndarray:
-    """Nodal load (n_nodes,) of a per-tet constant source q: int_T q N_a = q |T| / 4."""
-    return np.bincount(tets.ravel(), np.repeat(q * geom.volumes / 4.0, 4), minlength=n_nodes)
+    """Nodal load (n_nodes,) of a per-tet constant source q (n_tets,) (``volume_load_matrix``)."""
+    return volume_load_matrix(geom, tets, n_nodes) @ np.asarray(q, dtype=float)

@@ -41,7 +41,7 @@ from diathermy.errors import SceneError
 from diathermy.fem.edges import EdgeStiffness, LaplacianPattern, laplacian_pattern
 from diathermy.fem.geometry import ElementGeometry
 from diathermy.fem.multigrid import unit_diagonal
-from diathermy.fem.scalar import surface_load, volume_load
+from diathermy.fem.scalar import surface_load, volume_load_matrix
 from diathermy.mesh import SIDES, TetMesh
 
 
@@ -62,6 +62,7 @@ class HeatMesh:
     geom: ElementGeometry
     nodal_volume: np.ndarray
     face_area: dict[str, np.ndarray]
+    load: sp.csr_matrix  # (n_nodes, n_tets): per-tet source in W/m^3 -> nodal load in W
 
     @property
     def n_nodes(self) -> int:
@@ -82,20 +83,22 @@ class HeatMesh:
 
     def joule_load(self, q: np.ndarray) -> np.ndarray:
         """Nodal load (n_nodes,) in W of a per-tet source q (n_tets,) in W/m^3."""
-        return volume_load(self.geom, self.tets, self.n_nodes, q)
+        return self.load @ q
 
 
 def heat_mesh(mesh: TetMesh, geom: ElementGeometry, stiffness: EdgeStiffness) -> HeatMesh:
     """Collect what every heat step of ``mesh`` needs."""
     n = mesh.n_nodes
     face_area = {s: surface_load(mesh.points, mesh.boundary_faces[s], n, 1.0) for s in SIDES}
+    load = volume_load_matrix(geom, mesh.tets, n)
     return HeatMesh(
         stiffness=stiffness,
         pattern=laplacian_pattern(stiffness),
         tets=mesh.tets,
         geom=geom,
-        nodal_volume=volume_load(geom, mesh.tets, n, np.ones(mesh.n_tets)),
+        nodal_volume=load @ np.ones(mesh.n_tets),
         face_area=face_area,
+        load=load,
     )
 
 

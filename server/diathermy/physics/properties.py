@@ -56,4 +56,7 @@ def volumetric_heat_capacity(
 
 def nodes_to_tets(values: ArrayF, tets: ArrayF) -> ArrayF:
     """Mean of the 4 nodal values per tet: values (n_nodes, ...) -> (n_tets, ...)."""
-    return np.asarray(values)[np.asarray(tets)].mean(axis=1)
+    v = np.asarray(values)[np.asarray(tets)]
+    if v.ndim == 2:  # a scalar field: one BLAS product, several times faster than .mean
+        return v @ np.full(4, 0.25)
+    return v.mean(axis=1)

@@ -88,7 +88,7 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
     sol = ctx.potential.solve(sigma, contact, drive)
     fields = {
         "potential": sol.V,
-        "joule_heat": joule_heat(ctx.disc.geom.grads, ctx.disc.mesh.tets, sigma, sol.V),
+        "joule_heat": joule_heat(ctx.disc.gradient, sigma, sol.V),
     }
     handoff = {"delivered_power_w": sol.power_w}
     if sol.stats.cached:
