@@ -769,7 +769,7 @@ def main() -> None:
         try:
             grids = args.grids.split(",")
             seconds = [float(x) for x in args.seconds.split(",")]
-            seconds += [seconds[-1]] * (len(grids) - len(seconds))
+            seconds = (seconds + [seconds[-1]] * len(grids))[: len(grids)]
             clients = [int(x) for x in args.clients.split(",")]
             for grid_text, secs in zip(grids, seconds, strict=True):
                 grid = [int(x) for x in grid_text.split("x")]
