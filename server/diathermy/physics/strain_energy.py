@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
 from diathermy.fem.elastic import lame_parameters
 
@@ -13,14 +14,22 @@ def strain_energy_density(
     u: np.ndarray,
     youngs_modulus_pa: np.ndarray | float,
     nu: float,
+    *,
+    gradient: sp.csr_matrix | None = None,
 ) -> np.ndarray:
     """W = 1/2 eps(u) : C : eps(u) per tet (n_tets,) in J/m^3, of the TOTAL strain.
 
     PHYSICS.md section 2: the total strain, so free swelling under Delta p stores Delta p^2 / 2K
     (the energy in the pore walls). ``grads`` (n_tets, 4, 3) in 1/m, ``u`` (n_nodes, 3) in m,
     E per tet or one number in Pa: W = lambda/2 tr(eps)^2 + mu eps : eps.
+
+    ``gradient``: the mesh's ``fem.geometry.gradient_matrix`` when ``tets`` is the whole mesh;
+    the same numbers about twice as fast (``grads`` and ``tets`` are then not read).
     """
-    G = np.matmul(np.swapaxes(u[tets], 1, 2), grads)  # du_i / dx_k; 3x an einsum's speed
+    if gradient is not None:
+        G = (gradient @ u).reshape(-1, 3, 3)  # [e, k, i] = du_i / dx_k: W is the same for G^T
+    else:
+        G = np.matmul(np.swapaxes(u[tets], 1, 2), grads)  # du_i / dx_k; 3x an einsum's speed
     eps = G + np.swapaxes(G, 1, 2)
     eps *= 0.5
     lam, mu = lame_parameters(youngs_modulus_pa, nu)
