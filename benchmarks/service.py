@@ -343,6 +343,19 @@ def descendants(pid: int) -> list[int]:
     return out
 
 
+def cpu_ticks() -> tuple[int, int]:
+    """(steal, total) clock ticks of all CPUs so far (``/proc/stat``): steal is the time the
+    hypervisor ran other virtual machines on this one's CPUs."""
+    fields = [int(x) for x in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]]
+    return fields[7], sum(fields[:8])
+
+
+def steal_share(start: tuple[int, int]) -> float:
+    """Share of the CPUs' time since ``start`` (``cpu_ticks``) that the host took."""
+    steal, total = cpu_ticks()
+    return (steal - start[0]) / max(1, total - start[1])
+
+
 def run_queue_s(pid: int) -> float:
     """Seconds the processes under ``pid`` (the engines) spent runnable but waiting for a CPU
     (``/proc/<pid>/schedstat``, main threads)."""
@@ -377,6 +390,7 @@ def grid_rows(
     for _ in range(reps):
         for n in [0, *clients]:
             sid = warm_session(server, grid)
+            ticks = cpu_ticks()
             if n == 0:
                 q0, t0 = run_queue_s(server.proc.pid), time.monotonic()
                 alone.append(engine_alone(server, sid, seconds))
@@ -395,6 +409,7 @@ def grid_rows(
                 runs[n][-1]["engine_cpu"] = engine / wall
                 runs[n][-1]["client_cpu"] = (children_cpu_s() - c0) / wall
                 runs[n][-1]["vs_alone"] = runs[n][-1]["steps_per_s"] / alone[-1]
+                runs[n][-1]["steal"] = steal_share(ticks)
             print(n, alone[-1] if n == 0 else runs[n][-1], flush=True)
             server.http.delete(f"/v1/sessions/{sid}")
     rows = []
@@ -402,7 +417,7 @@ def grid_rows(
         row: dict[str, Any] = {"clients": n, "reps": reps}
         keys = ("steps_per_s", "fps_per_client", "p50_ms", "p99_ms", "vs_alone", "step_p50_ms")
         keys += ("step_p99_ms", "step_max_ms", "beyond_p99_ms")
-        for key in (*keys, "server_cpu", "engine_cpu", "client_cpu", "engine_wait"):
+        for key in (*keys, "server_cpu", "engine_cpu", "client_cpu", "engine_wait", "steal"):
             row[key] = statistics.median(r[key] for r in runs[n])
         row["samples"] = sum(r["samples"] for r in runs[n])
         row["dropped"] = sum(r["dropped"] for r in runs[n])
@@ -540,8 +555,8 @@ def fan_table(grid: str, alone: float, fan: list[dict[str, Any]]) -> list[str]:
         "| clients | steps/s | vs alone | frames/s per client | per client / steps/s | "
         "latency p50 ms | latency p99 ms | p99 bound ms | samples | frames dropped | "
         "engine step ms p50 / p99 / max | p99 beyond its two steps ms | "
-        "CPU server / engine / clients | engine waits for a CPU | targets |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+        "CPU server / engine / clients | engine waits for a CPU | host steal | targets |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
     for r in fan:
         bound = r["p99_bound_ms"]
@@ -565,7 +580,8 @@ def fan_table(grid: str, alone: float, fan: list[dict[str, Any]]) -> list[str]:
             f"{r['dropped']} | {r['step_p50_ms']:.0f} / {r['step_p99_ms']:.0f} / "
             f"{r['step_max_ms']:.0f} | {r['beyond_p99_ms']:.1f} | "
             f"{r['server_cpu']:.2f} / {r['engine_cpu']:.2f} / "
-            f"{r['client_cpu']:.2f} | {100 * r['engine_wait']:.0f} % | {verdict} |"
+            f"{r['client_cpu']:.2f} | {100 * r['engine_wait']:.0f} % | "
+            f"{100 * r['steal']:.0f} % | {verdict} |"
         )
     return lines + [""]
 
@@ -655,7 +671,11 @@ def write_report(
         "(on the server's CPUs when placed). *Engine waits for a CPU*: the share of the "
         "row's wall time the engine process was runnable but not running (its run-queue delay, "
         "`/proc/<pid>/schedstat`): time the other jobs, the server and the clients took from "
-        "it (placed, only other jobs can).",
+        "it (placed, only other jobs can). *Host steal*: the share of all CPUs' time during the "
+        "row that the hypervisor gave to other virtual machines (`/proc/stat`); the guest does "
+        "not see it as waiting, but a step that loses its CPU for a while is that much slower, "
+        "so a row with more than a few per cent of it measures the host, not the service "
+        f"(the whole run: {meta['steal']:.1f} %).",
         "",
         *trace_section(),
         "## Bytes per frame",
@@ -760,6 +780,7 @@ def main() -> None:
     slow_grid = [int(x) for x in args.slow_grid.split("x")]
     engine_cpus = bench_engine_cpus(args.engine_cpus)
     load = os.getloadavg()
+    ticks = cpu_ticks()
     tables = []
     with tempfile.TemporaryDirectory() as tmp:
         env = {**os.environ, "DIATHERMY_ENGINE_CPUS": format_cpus(engine_cpus)}
@@ -794,6 +815,7 @@ def main() -> None:
         "seconds": args.seconds,
         "argv": " ".join(sys.argv[1:]),
         "load": " / ".join(f"{x:.1f}" for x in (*load, *os.getloadavg())),
+        "steal": 100 * steal_share(ticks),
     }
     write_report(Path(args.out), meta, tables, sizes, slow)
     print(Path(args.out).read_text())

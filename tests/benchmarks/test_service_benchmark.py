@@ -41,6 +41,7 @@ def test_service_benchmark_runs_tiny_and_writes_its_table(tmp_path: Path) -> Non
         steps_per_s, fps = float(cells[1]), float(cells[3])
         engine_cpu = float(cells[12].split("/")[1])
         assert steps_per_s > 0 and fps > 0 and engine_cpu > 0, row
+        assert 0 <= float(cells[14].rstrip(" %")) <= 100, row  # the host's steal time
 
 
 def test_a_server_that_cannot_start_is_a_clear_error(tmp_path: Path) -> None:
