@@ -144,3 +144,21 @@ def test_any_field_keeps_its_signs_and_stays_finite(values, cells):
     d = signed_distance(phi, axes)
     assert np.all(np.isfinite(d))
     assert np.array_equal(np.sign(d), np.sign(phi))
+
+
+@pytest.mark.parametrize("level", [0, 1])
+def test_the_band_equals_the_sweeps_within_it(level):
+    """``narrow``: Jacobi rounds to the band give the fast sweeps' values wherever |d| <= narrow
+    (a crater-like sphere cap and a wavy field on a graded grid), and |d| > narrow beyond."""
+    axes, xyz, h = graded_nodes(level)
+    sphere = np.linalg.norm(xyz - np.array([0.47, 0.5, 0.95]), axis=-1) - 0.25
+    wavy = xyz[..., 2] - 0.6 - 0.1 * np.sin(7 * xyz[..., 0]) * np.cos(5 * xyz[..., 1])
+    for phi in (np.tanh(3.0 * sphere), wavy):
+        full = signed_distance(phi, axes)
+        for narrow in (2 * h, 6 * h):
+            band = signed_distance(phi, axes, narrow=narrow)
+            inside = np.abs(full) <= narrow
+            assert inside.sum() > 100
+            assert np.allclose(band[inside], full[inside], rtol=0, atol=1e-12)
+            assert np.all(np.abs(band[~inside]) > narrow - 1e-12)
+            assert np.array_equal(np.sign(band), np.sign(phi))

@@ -89,11 +89,21 @@ def around_removed(phi: np.ndarray, coords_zyx: Sequence[np.ndarray], margin: fl
     return tuple(box)
 
 
+def largest_cell(cells_xyz: Sequence[np.ndarray], box: tuple) -> float:
+    """The largest cell length (m) of the cells between the nodes of ``box`` (slices z, y, x)."""
+    out = 0.0
+    for cells, b in zip(tuple(cells_xyz)[::-1], box, strict=True):
+        c = np.asarray(cells, dtype=float)
+        lo, hi, _ = b.indices(c.size + 1)
+        out = max(out, float(c[lo : max(hi - 1, lo + 1)].max()))
+    return out
+
+
 def banded_distance(sub: np.ndarray, coords_zyx: Sequence[np.ndarray], narrow: float) -> np.ndarray:
     """Signed distance (m) to the zero set of ``sub`` on its nodes, NaN beyond ``narrow`` m
     (0: everywhere), as scikit-fmm's narrow band leaves it."""
     x, y, z = coords_zyx[2], coords_zyx[1], coords_zyx[0]
-    d = signed_distance(sub, (x, y, z))
+    d = signed_distance(sub, (x, y, z), narrow=narrow)
     if narrow > 0.0:
         d = np.where(np.abs(d) > narrow, np.nan, d)
     return d

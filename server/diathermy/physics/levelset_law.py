@@ -18,8 +18,9 @@ REINIT_EVERY = 10
 """Re-initialise phi to a signed distance every this many dissection steps (steps that moved
 the front; steps skipped because W < kappa everywhere do not count)."""
 REINIT_BAND_CELLS = 6.0
-"""Half-width of the re-initialised band around the front, in cells of the largest spacing,
-worked on around the removed region only (at 64x64x128 nodes the whole block takes ~0.6 s
+"""Half-width of the re-initialised band around the front, in cells of the largest spacing
+there (on a graded grid the largest cell around the removed region), worked on around the
+removed region only (at 64x64x128 nodes the whole block takes ~0.6 s
 against ~15 ms for a small crater)."""
 NONLOCAL_LENGTH_M = 0.0
 """Material length l in m over which the strain energy driving the front is averaged

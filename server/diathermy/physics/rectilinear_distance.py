@@ -12,6 +12,14 @@ This is the fast sweeping method (Zhao 2005) for |grad d| = 1 with per-node spac
   changes. The nodes of one anti-diagonal plane i + j + k = p never neighbour each other, so a
   whole plane updates at once (vectorised) and the result equals the node-by-node sweep.
 First order in h away from the zero set; exact for planes (tested).
+
+Only a band of half-width ``narrow`` wanted (re-initialisation): the same Godunov update of
+every node at once (Jacobi), repeated until no node at most ``narrow`` from the zero set
+changes. Values only fall, and a node's value depends only on smaller neighbours, so a round in
+which no value up to ``narrow`` changed leaves every node of the band at the sweeps' fixed
+point (tested against them); nodes beyond it are left above ``narrow``. On a crater's box of
+12 k nodes this takes tens of rounds of whole-array work where the sweeps' 8 orders x ~70
+planes x 3 iterations of small plane updates took 0.2-0.5 s.
 """
 
 from __future__ import annotations
@@ -24,11 +32,16 @@ from diathermy.errors import MeshError, SolverDivergedError
 
 
 def signed_distance(
-    phi: np.ndarray, axes_m: Sequence[np.ndarray], *, max_iterations: int = 30
+    phi: np.ndarray,
+    axes_m: Sequence[np.ndarray],
+    *,
+    max_iterations: int = 30,
+    narrow: float = 0.0,
 ) -> np.ndarray:
     """Signed distance (nz, ny, nx) in m to the zero set of phi (nz, ny, nx), sign of phi kept.
 
     axes_m: node coordinates (x (nx,), y (ny,), z (nz,)) in m, each strictly increasing.
+    narrow > 0: exact (the sweeps' values) only where |d| <= narrow, |d| > narrow elsewhere.
     A field with no zero crossing has no zero set: it is returned unchanged (as a copy).
     """
     phi = np.asarray(phi, dtype=float)
@@ -38,7 +51,10 @@ def signed_distance(
     d0 = _interface_distance(phi, h)
     if not np.isfinite(d0).any():
         return phi.copy()
-    d = _sweep(d0, np.isfinite(d0), h, max_iterations)
+    if narrow > 0.0:
+        d = _band(d0, np.isfinite(d0), h, narrow)
+    else:
+        d = _sweep(d0, np.isfinite(d0), h, max_iterations)
     d = np.where((d == 0.0) & (phi != 0.0), np.finfo(float).tiny, d)  # no sign lost to underflow
     return np.where(phi < 0, -d, d)
 
@@ -149,6 +165,35 @@ def _sweep(
     raise SolverDivergedError(
         f"signed_distance: fast sweeping did not settle in {max_iterations} iterations"
     )
+
+
+def _band(d0: np.ndarray, frozen: np.ndarray, h: list[np.ndarray], narrow: float) -> np.ndarray:
+    """Jacobi rounds of the Godunov update until nothing up to ``narrow`` changes (module doc)."""
+    shape = d0.shape
+    U = np.full(tuple(n + 2 for n in shape), np.inf)
+    U[1:-1, 1:-1, 1:-1] = d0
+    u = U.ravel()
+    strides = (U.shape[1] * U.shape[2], U.shape[2], 1)
+    kji = [idx[~frozen] for idx in np.indices(shape)]
+    flat = (kji[0] + 1) * strides[0] + (kji[1] + 1) * strides[1] + kji[2] + 1
+    hpad = [np.concatenate([[1.0], x, [1.0]]) for x in h]
+    h_lo = [hp[k] for hp, k in zip(hpad, kji, strict=True)]
+    h_hi = [hp[k + 1] for hp, k in zip(hpad, kji, strict=True)]
+    tol = 1e-12 * float(sum(x.sum() for x in h))
+    a = np.empty((flat.size, 3))
+    w = np.empty((flat.size, 3))
+    for _ in range(sum(shape) * 3 + 3):  # a value moves one node per round
+        for axis in range(3):
+            ulo, uhi = u[flat - strides[axis]], u[flat + strides[axis]]
+            use_lo = ulo <= uhi
+            a[:, axis] = np.where(use_lo, ulo, uhi)
+            w[:, axis] = np.where(use_lo, h_lo[axis], h_hi[axis])
+        cur = u[flat]
+        new = np.minimum(cur, godunov_update(a, w))
+        u[flat] = new
+        if not np.any((new < cur - tol) & (new <= narrow)):
+            return U[1:-1, 1:-1, 1:-1].copy()
+    raise SolverDivergedError("signed_distance: the band did not settle")
 
 
 def _update(

@@ -44,19 +44,21 @@ def reinitialize(
     does the whole block. A block with no healthy or no removed node is returned unchanged.
     On a graded grid (``spacing`` the cell lengths per axis) d comes from fast sweeping on the
     node coordinates (``physics.rectilinear_distance``) and the band is counted in the largest
-    cell; the rule is the same.
+    cell around the removed region (the cells the front crosses; the block's largest, up to
+    6x the working region's on the default grids, made the band the whole block); the rule is
+    the same.
     """
     phi = np.asarray(phi, dtype=float)
     if not ((phi < 0).any() and (phi > 0).any()):
         return phi.copy()
     if graded.is_graded(spacing):
         coords = graded.node_coordinates(spacing)  # type: ignore[arg-type]
-        narrow = 0.0 if band_cells is None else band_cells * max(float(np.max(c)) for c in spacing)
-        box = (
-            (slice(None),) * 3
-            if band_cells is None
-            else graded.around_removed(phi, coords, 2 * narrow)
-        )
+        if band_cells is None:
+            narrow, box = 0.0, (slice(None),) * 3
+        else:  # the band in the front's cells: the block's largest made it the whole block
+            front = graded.around_removed(phi, coords, 0.0)
+            narrow = band_cells * graded.largest_cell(spacing, front)  # type: ignore[arg-type]
+            box = graded.around_removed(phi, coords, 2 * narrow)
         sub = np.ascontiguousarray(phi[box])
         d = graded.banded_distance(sub, [c[b] for c, b in zip(coords, box, strict=True)], narrow)
     else:
