@@ -174,7 +174,8 @@ def _band(d0: np.ndarray, frozen: np.ndarray, h: list[np.ndarray], narrow: float
     U[1:-1, 1:-1, 1:-1] = d0
     u = U.ravel()
     strides = (U.shape[1] * U.shape[2], U.shape[2], 1)
-    kji = [idx[~frozen] for idx in np.indices(shape)]
+    free = np.indices(shape)[:, ~frozen]  # (3, n_free) as (k, j, i)
+    kji = [free[0], free[1], free[2]]
     flat = (kji[0] + 1) * strides[0] + (kji[1] + 1) * strides[1] + kji[2] + 1
     hpad = [np.concatenate([[1.0], x, [1.0]]) for x in h]
     h_lo = [hp[k] for hp, k in zip(hpad, kji, strict=True)]

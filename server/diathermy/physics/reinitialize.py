@@ -51,6 +51,7 @@ def reinitialize(
     phi = np.asarray(phi, dtype=float)
     if not ((phi < 0).any() and (phi > 0).any()):
         return phi.copy()
+    box: tuple[slice, ...]
     if graded.is_graded(spacing):
         coords = graded.node_coordinates(spacing)  # type: ignore[arg-type]
         if band_cells is None:
