@@ -8,11 +8,13 @@ itself reads no registry, file or environment variable it was not handed.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Literal
 
 from diathermy.engine.context import EngineContext
 from diathermy.errors import DiathermyError, SceneError
+from diathermy.fem.elastic import elastic_assembler
 from diathermy.physics.incremental_mechanics import IncrementalFEMBackend
 from diathermy.physics.local_solve import DEFAULT_GUARD_TOLERANCE, IncrementalSettings
 from diathermy.physics.mechanics_backend import FEMBackend, MechanicsBackend
@@ -86,12 +88,19 @@ def make_backend(
     """The backend ``ctx.scene.mechanics`` asks for."""
     cfg, tissue = ctx.scene.mechanics, ctx.tissue
     if cfg.backend == "fem":
+        disc = ctx.disc
         fem = FEMBackend(
-            ctx.disc.mesh,
+            disc.mesh,
             poisson_ratio=tissue.poisson_ratio,
             p0_pa=tissue.p_atm_pa,
             rtol=cfg.rtol,
             ersatz_ratio=tissue.ersatz_stiffness_ratio,
+            # the discretization's pattern, geometry and gradient: the backend's own build has
+            # the same pattern and geometry (a second copy: ~9 % of the engine's memory)
+            assembler=replace(
+                elastic_assembler(disc.pattern, disc.geom, disc.mesh.shape_id),
+                gradient=disc.gradient,
+            ),
         )
         if not ctx.scene.solver.incremental or cfg.predictor == "none":
             return fem

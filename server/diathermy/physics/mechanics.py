@@ -281,7 +281,14 @@ class MechanicsSolver:
         """Right-hand side (3 n_nodes,) of nodal pressure (n_nodes,) in Pa, constraints applied."""
         geom = self.assembler.geom
         dp = np.asarray(pressure_pa, dtype=float) - p0_pa
-        f = eigenstress_load(geom, self.mesh.tets, self.mesh.n_nodes, dp, self.healthy).ravel()
+        f = eigenstress_load(
+            geom,
+            self.mesh.tets,
+            self.mesh.n_nodes,
+            dp,
+            self.healthy,
+            gradient=self.assembler.gradient,
+        ).ravel()
         if self._lift is not None:
             f -= self._lift
         f[self.constraints.dofs] = self._constrained_rhs
