@@ -13,8 +13,8 @@ turn, so that other load on a shared machine hits them alike): ``full`` (``solve
 false: every effect solved in full every step, the reference), ``incremental`` (the default:
 the mechanics from the previous displacement, Ritz-scaled, patch-corrected, a full solve when
 the residual check or the interval asks for it) and, on the uniform grid that has a shipped
-model, ``cnn`` (the CNN predictor with its patch); with ``--tight`` also the incremental mode as
-it was before 2026-12-03 (``TIGHT_MODE``: the polish to 1e-3 with degree-3 V-cycles). Per mode: median and p90 wall time per step,
+model, ``cnn`` (the CNN predictor with its patch); with ``--tight`` also the incremental mode
+without its windowed polish (``TIGHT_MODE``: every polish iteration over the whole block). Per mode: median and p90 wall time per step,
 the real-time factor (dt / median wall), the median time of each effect, the mechanics' share
 of local steps, and against ``full`` at the same step the max and mean strain-energy error and
 the max temperature error, and the final cut-volume difference. Writes
@@ -180,10 +180,10 @@ MODES: dict[str, dict[str, Any]] = {
     "incremental": {},
     "cnn": {"backend": "cnn"},
 }
-TIGHT_MODE = "incremental 1e-3 deg3"
-"""``--tight``: the incremental mode as it was before 2026-12-03, beside today's default: the
-polish to an energy-error estimate of 1e-3 (now 3e-3) with Chebyshev degree-3 V-cycles (now 1)."""
-TIGHT: dict[str, Any] = {"energy_tolerance": 1e-3, "polish_iterations": 10, "amg_degree": 3}
+TIGHT_MODE = "incremental, block polish"
+"""``--tight``: the incremental mode without its windowed polish (``mechanics.polish_window_m``
+0, as before 2026-12-03 10:00: every polish iteration over the whole block), beside the default."""
+TIGHT: dict[str, Any] = {"polish_window_m": 0.0}
 EFFECTS = ("electric", "thermal", "vaporization", "mechanics", "dissection")
 
 
@@ -197,20 +197,7 @@ def modes_for(scene: Scene, tight: bool = False) -> list[str]:
 
 def load_mode(path: Path, mode: str) -> Simulation:
     """The checkpoint continued in ``mode`` (a ``MODES`` key or ``TIGHT_MODE``)."""
-    settings = dict(TIGHT if mode == TIGHT_MODE else MODES[mode])
-    degree = settings.pop("amg_degree", None)
-    sim = load_as(path, **settings)
-    if degree is not None:  # the mechanics hierarchy with other Chebyshev smoothers, built anew
-        backend = fem_of(sim.ctx.mechanics)
-        assert backend is not None
-        cheb = ("chebyshev", {"degree": degree})
-        backend.krylov.amg_options = {
-            **DEFAULT_AMG_OPTIONS,
-            "presmoother": cheb,
-            "postsmoother": cheb,
-        }
-        backend.krylov.reuse = type(backend.krylov.reuse)(rebuild_due=True)
-    return sim
+    return load_as(path, **(TIGHT if mode == TIGHT_MODE else MODES[mode]))
 
 
 def run_modes(path: Path, modes: list[str], steps: int) -> dict[str, dict[str, list[float]]]:
@@ -391,7 +378,7 @@ def main() -> None:
         r.add_argument(
             "--tight",
             action="store_true",
-            help=f"run: also '{TIGHT_MODE}', the incremental mode's settings before 2026-12-03",
+            help=f"run: also '{TIGHT_MODE}', the incremental mode without its windowed polish",
         )
     s = sub.add_parser("solvers", help="per-saving cost of a cutting step")
     s.add_argument("--grids", nargs="+", type=float, default=[0.0, 0.5], help="0: uniform")

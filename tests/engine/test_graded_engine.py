@@ -61,6 +61,23 @@ def test_graded_checkpoint_restores_bit_for_bit(tmp_path):
         assert np.array_equal(arr, back.state.arrays[name]), name
 
 
+def test_a_corrupt_polish_window_in_a_checkpoint_is_refused(tmp_path):
+    import h5py
+
+    from diathermy.errors import CheckpointError
+
+    sim = Simulation(graded_scene())
+    sim.run(12)
+    assert sim.ctx.mechanics.window is not None  # the windowed polish's, saved with the state
+    path = sim.save_checkpoint(tmp_path / "c.h5")
+    with h5py.File(path, "a") as f:
+        box = f["solver/mechanics_window_box"][()]
+        del f["solver/mechanics_window_box"]
+        f["solver/mechanics_window_box"] = box[:2]
+    with pytest.raises(CheckpointError, match="mechanics window"):
+        Simulation.load_checkpoint(path)
+
+
 def read_grid_attrs(path):
     import h5py
 

@@ -58,3 +58,4 @@ def test_scene_defaults_are_the_solver_defaults():
     cfg, settings = MechanicsConfig(), IncrementalSettings()
     assert cfg.energy_tolerance == settings.energy_tolerance
     assert cfg.polish_iterations == settings.polish_iterations
+    assert cfg.polish_window_m == settings.window_m

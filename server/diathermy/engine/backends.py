@@ -113,6 +113,7 @@ def make_backend(
             guard=guard_of(ctx),
             energy_tolerance=cfg.energy_tolerance,
             polish_iterations=cfg.polish_iterations,
+            window_m=cfg.polish_window_m,
         )
         if cfg.predictor != "auto":
             return IncrementalFEMBackend(fem, settings)

@@ -186,6 +186,10 @@ def _hierarchy_state(ctx: EngineContext) -> dict[str, np.ndarray]:
         out["mechanics_since_full"] = np.asarray(backend.since_full)
         if backend.last_E_pa is not None:
             out["mechanics_last_E"] = backend.last_E_pa
+        if backend.window is not None:
+            out["mechanics_window_box"] = backend.window.box.as_array()
+            out["mechanics_window_E"] = backend.window.built_E
+            out["mechanics_window_healthy"] = backend.window.built_healthy
     fem = fem_of(backend)
     origin = fem.hierarchy_origin if fem is not None else None
     if origin is not None:
@@ -214,6 +218,18 @@ def _restore_hierarchies(ctx: EngineContext, solver: dict[str, np.ndarray]) -> N
     if isinstance(backend, IncrementalFEMBackend) and "mechanics_since_full" in solver:
         backend.since_full = int(solver["mechanics_since_full"])
         backend.last_E_pa = solver.get("mechanics_last_E")
+        backend.window = None
+        if "mechanics_window_box" in solver:
+            box = np.asarray(solver["mechanics_window_box"])
+            E = np.asarray(solver.get("mechanics_window_E", ()))
+            healthy = np.asarray(solver.get("mechanics_window_healthy", ()))
+            n_tets = ctx.disc.mesh.n_tets
+            if box.shape != (4, 3) or E.shape != (n_tets,) or healthy.shape != (n_tets,):
+                raise CheckpointError(
+                    "checkpoint's mechanics window: a (4, 3) box and E and healthy per tet "
+                    f"({n_tets}) expected, got {box.shape}, {E.shape}, {healthy.shape}"
+                )
+            backend.restore_window(box, E, healthy.astype(bool))
     fem = fem_of(backend)
     if "mechanics_hierarchy_E" in solver and fem is not None:
         fem.restore_hierarchy(

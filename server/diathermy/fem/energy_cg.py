@@ -37,20 +37,26 @@ def energy_cg(
     *,
     tol: float,
     maxiter: int,
+    norm_sq: float | None = None,
+    residual: np.ndarray | None = None,
 ) -> EnergyCG:
     """PCG on A x = b from x0 until the energy-error estimate is at most ``tol`` or after
-    ``maxiter`` iterations (0: only the estimate of x0, one V-cycle)."""
+    ``maxiter`` iterations (0: only the estimate of x0, one V-cycle).
+
+    ``norm_sq``: the squared energy norm the estimate is relative to (default the iterate's own
+    x.A x; a correction solved for on its own passes the norm of the whole answer).
+    ``residual``: b - A x0 when the caller has it (saves a mat-vec)."""
     if not 0 < tol < 1 or maxiter < 0:
         raise ValueError(f"tol must lie in (0, 1) and maxiter be >= 0, got {tol}, {maxiter}")
     b_norm = float(np.linalg.norm(b))
     x = np.array(x0, dtype=float)
-    r = b - A @ x
+    r = b - A @ x if residual is None else np.array(residual, dtype=float)
     z = M @ r
     rz = float(r @ z)
     p = z.copy()
     its = 0
     while True:
-        xAx = float(x @ (b - r))
+        xAx = float(x @ (b - r)) if norm_sq is None else norm_sq
         estimate = np.sqrt(max(rz, 0.0) / xAx) if xAx > 0 else np.inf
         if estimate <= tol or its >= maxiter or rz <= 0:
             break
@@ -66,5 +72,5 @@ def energy_cg(
         p *= rz / rz_old
         p += z
         its += 1
-    residual = float(np.linalg.norm(r)) / b_norm if b_norm > 0 else 0.0
-    return EnergyCG(x, its, float(estimate), residual)
+    relative = float(np.linalg.norm(r)) / b_norm if b_norm > 0 else 0.0
+    return EnergyCG(x, its, float(estimate), relative)

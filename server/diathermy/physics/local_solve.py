@@ -30,6 +30,12 @@ max strain-energy error 0.9-1.2e-3 and temperature <= 0.030 K (1e-3: 2-3e-4; 1e-
 DEFAULT_POLISH_ITERATIONS = 20
 """PCG iterations with the kept hierarchy before the step falls back to the full solve (the
 fixed electrode's 0.4 mm grid polishes in 4-9 with the degree-1 V-cycle; a full solve takes 27-116)."""
+DEFAULT_WINDOW_M = 0.016
+"""Margin of the windowed polish around the patch (``polish_window``): on the default graded
+grid's cutting steps 97-99 % of the patched prediction's error energy lies within 16 mm of it
+(docs/realtime.md)."""
+WINDOW_MAX_FRACTION = 0.25
+"""The window holds at most this share of the nodes (its margin is halved until it does)."""
 Guard = Literal["residual", "energy"]
 
 
@@ -48,12 +54,19 @@ class IncrementalSettings:
     guard: Guard = "residual"  # 'energy': only the polish's energy estimate accepts a step
     energy_tolerance: float = DEFAULT_ENERGY_TOLERANCE
     polish_iterations: int = DEFAULT_POLISH_ITERATIONS  # 0: no polish, the full solve
+    window_m: float = DEFAULT_WINDOW_M  # the windowed polish's margin; 0: none
+    window_iterations: int = 30
+    window_share: float = 0.3  # the window's tolerance: this x energy_tolerance
 
     def __post_init__(self) -> None:
         if not self.guard_tolerance > 0 or self.full_every < 1 or self.patch_rounds < 1:
             raise ValueError("guard_tolerance must be > 0, full_every and patch_rounds >= 1")
         if not 0 < self.energy_tolerance < 1 or self.polish_iterations < 0:
             raise ValueError("energy_tolerance must lie in (0, 1), polish_iterations be >= 0")
+        if not self.window_m >= 0 or self.window_iterations < 1 or not 0 < self.window_share <= 1:
+            raise ValueError(
+                "window_m must be >= 0, window_iterations >= 1, window_share in (0, 1]"
+            )
         if self.guard not in ("residual", "energy"):
             raise ValueError(f"guard must be 'residual' or 'energy', got {self.guard!r}")
 
@@ -68,6 +81,7 @@ class LocalSolve:
     patch_nodes: np.ndarray  # nodes where u is not ritz_scale x the start
     ritz_scale: float
     predictor: str = "previous"
+    Ku: np.ndarray | None = None  # K u (n_nodes, 3) N, kept up to date through the patch
 
 
 def local_solve(
@@ -103,4 +117,4 @@ def local_solve(
     if u_prev is not None:
         held = np.flatnonzero(np.any(~free & (u_prev != 0), axis=1))  # zeroed constrained values
         moved = np.union1d(moved, held)
-    return LocalSolve(u, after, first, moved, start.ritz_scale, start.name)
+    return LocalSolve(u, after, first, moved, start.ritz_scale, start.name, Ku)

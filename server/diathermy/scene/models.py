@@ -190,6 +190,13 @@ class MechanicsConfig(_Model):
         description="fem, incremental: PCG iterations with the kept hierarchy before the step "
         "is solved in full (0: no polish)",
     )
+    polish_window_m: Annotated[float, Field(ge=0, le=1)] = Field(
+        0.016,
+        description="fem, incremental: the polish first solves on a window of nodes around the "
+        "patch grown by this margin in m (halved until the window holds at most a quarter of "
+        "the nodes), the rest held, with its own kept AMG hierarchy; the global energy check "
+        "follows (0: no window, the whole block)",
+    )
     correction: Literal["none", "patch"] = Field(
         "patch",
         description="cnn and fem-previous/auto: 'patch' solves equilibrium exactly on the nodes "

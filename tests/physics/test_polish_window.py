@@ -1,0 +1,145 @@
+"""The windowed polish (physics.polish_window): the window's block is the operator's, PCG on it
+lowers the global energy-norm error to the best the window allows (all of it for a window over
+the block), and its box grows with the change and stays within its node budget."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from diathermy.physics.local_solve import IncrementalSettings
+from diathermy.physics.mechanics import DEFAULT_AMG_OPTIONS
+from diathermy.physics.polish_window import (
+    WindowBox,
+    block_submatrix_plan,
+    build_window,
+    choose_box,
+    nodes_in_box,
+    window_correct,
+)
+from tests.physics.test_incremental_mechanics import P0, _local, _setup
+
+
+@pytest.fixture(scope="module")
+def case():
+    solver, u1, p2, graph = _setup()
+    local = _local(solver, u1, p2, graph, IncrementalSettings(guard_tolerance=1e-12))
+    f = solver.load(p2, P0)
+    A, s = solver.krylov.A, solver.scale
+    b = f * s
+    x_true, info = spla.cg(A, b, rtol=1e-12, atol=0.0, maxiter=5000)
+    assert info == 0
+    return solver, local, A, b, x_true
+
+
+def _energy_error(A, x, x_true) -> float:  # noqa: ANN001
+    e = x - x_true
+    return float(np.sqrt(e @ (A @ e) / (x_true @ (A @ x_true))))
+
+
+def test_the_window_block_is_the_operators_block(case):
+    solver, local, A, _, _ = case
+    pts = solver.mesh.points
+    box = choose_box(pts, local.patch_nodes, 0.01, pts.shape[0])
+    nodes = nodes_in_box(pts, box.lo, box.hi)
+    positions, indptr, indices = block_submatrix_plan(A.indptr, A.indices, nodes, pts.shape[0])
+    dofs = (3 * nodes[:, None] + np.arange(3)).ravel()
+    sub = sp.bsr_matrix((A.data[positions], indices, indptr), shape=(dofs.size, dofs.size))
+    expected = A.tocsr()[dofs][:, dofs]
+    assert abs(sub.tocsr() - expected).max() == 0.0
+    assert sub.nnz == expected.nnz
+
+
+def test_window_correction_lowers_the_global_error_to_the_windows_best(case):
+    solver, local, A, b, x_true = case
+    s = solver.scale
+    x0 = local.u.ravel() / s
+    r = b - A @ x0
+    norm_sq = float(x0 @ (b - r))
+    pts, n = solver.mesh.points, solver.mesh.n_nodes
+
+    def window(margin_m: float):  # noqa: ANN202
+        box = choose_box(pts, local.patch_nodes, margin_m, n)
+        return build_window(
+            A, solver.krylov.near_nullspace, pts, box, DEFAULT_AMG_OPTIONS,
+            solver.youngs_modulus_pa, solver.healthy,
+        )  # fmt: skip
+
+    before = _energy_error(A, x0, x_true)
+    part = window(0.01)
+    assert 0 < part.nodes.size < n
+    errors = []
+    for k in (1, 3, 60):
+        res = window_correct(part, A, r, norm_sq, tol=1e-12, maxiter=k)
+        x = x0.copy()
+        x[part.dofs] += res.x
+        errors.append(_energy_error(A, x, x_true))
+    # CG minimises the same energy over the window's corrections: it never goes up, and it
+    # reaches the best correction the window allows (the exact solve of its block)
+    assert errors[0] < before
+    assert all(e2 <= e1 * (1 + 1e-12) for e1, e2 in zip(errors, errors[1:], strict=False))
+    exact = x0.copy()
+    exact[part.dofs] += spla.spsolve(part.matrix(A).tocsc(), r[part.dofs])
+    assert errors[-1] == pytest.approx(_energy_error(A, exact, x_true), rel=1e-3)
+    # the estimate is relative to the whole answer's norm (the correction's own is 0 at the
+    # start, which no tolerance would pass), so a loose tolerance stops early
+    loose = window_correct(part, A, r, norm_sq, tol=0.5 * before, maxiter=60)
+    assert loose.estimate <= 0.5 * before and loose.iterations < 3
+    # a window over the whole block is the global solve
+    whole = window(1.0)
+    assert whole.nodes.size == n
+    res = window_correct(whole, A, r, norm_sq, tol=1e-9, maxiter=200)
+    assert _energy_error(A, x0 + res.x, x_true) < 1e-6
+
+
+def test_the_box_grows_with_the_change_and_keeps_its_node_budget():
+    pts = np.stack(np.meshgrid(*(np.linspace(0, 0.1, 11),) * 3, indexing="ij"), -1).reshape(-1, 3)
+    change = nodes_in_box(pts, np.full(3, 0.05), np.full(3, 0.05))
+    wide = choose_box(pts, change, 0.02, pts.shape[0])
+    assert np.allclose(wide.lo, 0.03) and np.allclose(wide.hi, 0.07)
+    assert np.allclose(wide.inner_lo, 0.04) and np.allclose(wide.inner_hi, 0.06)
+    assert wide.holds(np.full(3, 0.045), np.full(3, 0.055))
+    assert not wide.holds(np.full(3, 0.035), np.full(3, 0.055))
+    tight = choose_box(pts, change, 0.02, 27)  # 5^3 nodes at 0.02, 3^3 at 0.01
+    assert nodes_in_box(pts, tight.lo, tight.hi).size <= 27
+    back = WindowBox.from_array(tight.as_array())
+    assert np.array_equal(back.as_array(), tight.as_array())
+
+
+def test_a_window_needs_a_block_operator_and_nodes(case):
+    solver, local, A, _, _ = case
+    pts = solver.mesh.points
+    far = WindowBox(*(np.full(3, 10.0),) * 4)
+    with pytest.raises(ValueError, match="holds no node"):
+        build_window(
+            A, None, pts, far, DEFAULT_AMG_OPTIONS, solver.youngs_modulus_pa, solver.healthy
+        )
+    with pytest.raises(ValueError, match="3x3-block"):
+        build_window(
+            A.tocsr().tobsr(blocksize=(1, 1)), None, pts, far, DEFAULT_AMG_OPTIONS,
+            solver.youngs_modulus_pa, solver.healthy,
+        )  # fmt: skip
+
+
+def test_spread_and_the_patch_residual_are_the_global_mat_vecs(case):
+    """The polish reads the residual off the patch's K u and updates it from the window's own
+    rows: both equal the global mat-vecs they stand for."""
+    solver, local, A, b, _ = case
+    s = solver.scale
+    x0 = local.u.ravel() / s
+    assert local.Ku is not None
+    r = b - A @ x0
+    np.testing.assert_allclose(b - s * local.Ku.ravel(), r, rtol=0, atol=1e-12 * np.abs(b).max())
+    box = choose_box(solver.mesh.points, local.patch_nodes, 0.01, solver.mesh.n_nodes)
+    w = build_window(
+        A, None, solver.mesh.points, box, DEFAULT_AMG_OPTIONS,
+        solver.youngs_modulus_pa, solver.healthy,
+    )  # fmt: skip
+    d = np.random.default_rng(1).standard_normal(w.dofs.size)
+    full = np.zeros(A.shape[0])
+    full[w.dofs] = d
+    np.testing.assert_allclose(
+        w.spread(A, d), A @ full, rtol=0, atol=1e-12 * np.abs(A @ full).max()
+    )
