@@ -96,7 +96,9 @@ def test_joule_heat_matches_reference_loop(small_mesh, rng):
 
 
 def test_joule_heat_equals_delivered_power(paper_meshes):
-    """sum_e q_e |T_e| = int j V to 1e-6 (rtol 1e-10), with a non-uniform conductivity."""
+    """The delivered power is the Joule heat sum_e q_e |T_e| (to round-off: R is the field's own
+    dissipation) and the contact's int j V (to the solve's accuracy, rtol 1e-10), with a
+    non-uniform conductivity."""
     for mesh in paper_meshes.values():
         geom, solver = setup(mesh)
         z = mesh.centroids()[:, 2]
@@ -105,8 +107,8 @@ def test_joule_heat_equals_delivered_power(paper_meshes):
             sigma, contact_weights(mesh, PAPER_CENTER, A_M), ElectrodeDrive()
         )
         q = joule_heat(gradient_matrix(geom, mesh.tets, mesh.n_nodes), sigma, sol.V)
-        assert np.dot(q, geom.volumes) == pytest.approx(sol.power_w, rel=1e-6)
-        assert sol.power_w == pytest.approx(delivered_power(sol.load, sol.V), rel=1e-14)
+        assert np.dot(q, geom.volumes) == pytest.approx(sol.power_w, rel=1e-12)
+        assert sol.power_w == pytest.approx(delivered_power(sol.load, sol.V), rel=1e-8)
         assert sol.current_a == pytest.approx(J0 * np.pi * A_M**2, rel=1e-10)
 
 
@@ -167,6 +169,13 @@ def test_energy_guard_accepts_a_potential_within_its_tolerance(paper_meshes, tol
     assert energy <= 5 * tol
     assert abs(guarded.power_w - exact.power_w) <= 2 * tol * exact.power_w
     assert 0 < guarded.stats.iterations < exact.stats.iterations
+    # whatever the accuracy, the drive's power is the guarded field's own Joule heat
+    geom = setup(mesh)[0]
+    q = joule_heat(gradient_matrix(geom, mesh.tets, mesh.n_nodes), sigma, guarded.V)
+    assert np.dot(q, geom.volumes) == pytest.approx(guarded.power_w, rel=1e-12)
+    powered = DrivenPotential(solver).solve(sigma, contact, ElectrodeDrive("power", power_w=30.0))
+    q = joule_heat(gradient_matrix(geom, mesh.tets, mesh.n_nodes), sigma, powered.V)
+    assert np.dot(q, geom.volumes) == pytest.approx(30.0, rel=1e-12)
     _, plain = setup(mesh)
     assert plain.energy_tolerance is None  # the default solver solves to rtol
 

@@ -2,7 +2,9 @@
 
 V is linear in the injected current I and P = I^2 R, so one solve at unit current per
 (conductivity, contact) serves both drives exactly: a constant current density j injects
-I = j * area, a constant power P injects I = sqrt(P / R).
+I = j * area, a constant power P injects I = sqrt(P / R). R is the unit field's dissipation
+int sigma |grad V1|^2 (the contact's int j1 V1 for an exact solve; the Joule heat itself for a
+guarded one).
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ import numpy as np
 
 from diathermy.errors import SceneError, SolverDivergedError
 from diathermy.physics.contact_load import ContactWeights, same_contact
-from diathermy.physics.electric import PotentialSolver, PotentialStats, delivered_power
+from diathermy.physics.electric import PotentialSolver, PotentialStats
 
 
 @dataclass(frozen=True)
@@ -83,7 +85,9 @@ class DrivenPotential:
             return V1, load1, R, PotentialStats(0, 0.0, 0.0, 0.0, 0.0, False, True)
         load1 = contact.weights / contact.area_m2
         V1, stats = self.solver.solve(load1)
-        R = delivered_power(load1, V1)
+        # the field's own dissipation at 1 A: a drive then puts exactly its power into the
+        # tissue's Joule heat even where the guarded solve stopped at its energy tolerance
+        R = self.solver.dissipation(V1)
         self._contact, self._unit = contact, (V1, load1, R)
         self._version = self.solver.version
         return V1, load1, R, stats

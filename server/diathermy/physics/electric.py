@@ -207,6 +207,16 @@ class PotentialSolver:
         self.krylov.reuse = reuse
         self.hierarchy_sigma = self.sigma
 
+    def dissipation(self, V: np.ndarray) -> float:
+        """int sigma |grad V|^2 dV in W of a potential V (n_nodes,) in V: V^T K V summed over the
+        mesh edges, sum w_ij (V_i - V_j)^2. Exactly the Joule heat the thermal step receives,
+        whatever the solve's accuracy; for the exact solution it equals the contact's load . V."""
+        if self.weights is None:
+            raise SceneError("potential: set_conductivity before dissipation")
+        i, j = self.stiffness.edges[:, 0], self.stiffness.edges[:, 1]
+        dV = V[i] - V[j]
+        return float(self.weights @ (dV * dV))
+
     def _lift(self, V: np.ndarray) -> np.ndarray:
         """K_fD V_D on the free nodes: what the prescribed values push into the free rows."""
         assert self.weights is not None
