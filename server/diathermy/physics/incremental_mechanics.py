@@ -204,15 +204,19 @@ class IncrementalFEMBackend:
         start, _, _ = self._start(solver, f, pressure_pa, level_set_m, warm_start)
         if start is None:
             return warm_start
-        if self._graph is None:
-            self._graph = node_graph(solver.K)
-        persistence = start.name == "previous"
-        local = local_solve(
-            solver, start, f, self._graph, self.settings, warm_start if persistence else None
-        )
-        u, _ = self._windowed(solver, f, local, extra)
-        extra.update(full_start=f"{start.name}, patched and polished on its window")
+        u, _ = self._windowed(solver, f, self._local(solver, start, f, warm_start), extra)
+        how = "patched and polished on its window" if "window_nodes" in extra else "patched"
+        extra.update(full_start=f"{start.name}, {how}")
         return u
+
+    def _local(
+        self, solver: MechanicsSolver, start: Start, f: np.ndarray, warm_start: np.ndarray | None
+    ) -> LocalSolve:
+        """The start Ritz-scaled and patch-corrected on this system (``local_solve``)."""
+        if self._graph is None:
+            self._graph = node_graph(solver.K)  # the mesh's pattern: built once
+        u_prev = warm_start if start.name == "previous" else None
+        return local_solve(solver, start, f, self._graph, self.settings, u_prev)
 
     def _build_window(self, solver: MechanicsSolver, box: WindowBox) -> PolishWindow:
         """A new window on ``box`` for this topology's operator, kept as ``self.window``."""
@@ -329,12 +333,8 @@ class IncrementalFEMBackend:
                 why = picked
         if why is None:
             assert start is not None
-            if self._graph is None:
-                self._graph = node_graph(solver.K)  # the mesh's pattern: built once
             persistence = start.name == "previous"
-            local = local_solve(
-                solver, start, f, self._graph, self.settings, warm_start if persistence else None
-            )
+            local = self._local(solver, start, f, warm_start)
             extra.update(
                 predictor=start.name,
                 residual_before=local.residual_before,

@@ -70,6 +70,24 @@ def residual_patch(
         seeds = seeds[: max(1, seeds.size // 2)]
 
 
+def block_rows_plan(indptr: np.ndarray, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The stored blocks of the block rows ``nodes`` in a block pattern (its indptr): their
+    positions in the data (n_blocks,) and the local row, 0 .. len(nodes) - 1, of each."""
+    starts, counts = indptr[nodes], indptr[nodes + 1] - indptr[nodes]
+    positions = np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
+    return positions, np.repeat(np.arange(nodes.size), counts)
+
+
+def apply_from_rows(
+    blocks: np.ndarray, row: np.ndarray, col: np.ndarray, d: np.ndarray, n_nodes: int
+) -> np.ndarray:
+    """K d (n_nodes, 3) for a symmetric 3x3-block K and d (m, 3) nonzero on m block rows only,
+    from those rows' blocks (n_blocks, 3, 3) with their local row and global column:
+    (K d)_c = sum_r K_cr d_r = sum_r K_rc^T d_r, no global mat-vec."""
+    Kd = np.einsum("bji,bj->bi", blocks, d[row])
+    return np.column_stack([np.bincount(col, Kd[:, i], minlength=n_nodes) for i in range(3)])
+
+
 def patch_correct(
     stiffness: sp.bsr_matrix,
     f: np.ndarray,
@@ -98,11 +116,7 @@ def patch_correct(
         return PatchCorrection(u, Ku, 0, before, before, time.perf_counter() - t0)
     local = np.full(n, -1, dtype=np.int64)
     local[nodes] = np.arange(m)
-    indptr = stiffness.indptr
-    starts, counts = indptr[nodes], indptr[nodes + 1] - indptr[nodes]
-    offsets = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    pos = np.repeat(starts - offsets, counts) + np.arange(int(counts.sum()))
-    row = np.repeat(np.arange(m), counts)  # local block row of each stored block
+    pos, row = block_rows_plan(stiffness.indptr, nodes)  # row: local block row of each block
     col = stiffness.indices[pos]  # global block column
     blocks = stiffness.data[pos]  # (n_blocks, 3, 3)
     inside = local[col] >= 0
@@ -130,7 +144,6 @@ def patch_correct(
     u_new = u.copy()
     u_new[nodes] += d
     # (K d)_c = sum_r K_cr d_r = sum_r K_rc^T d_r over the patch's block rows r
-    Kd = np.einsum("bji,bj->bi", blocks, d[row])
-    Ku_new = Ku + np.column_stack([np.bincount(col, Kd[:, i], minlength=n) for i in range(3)])
+    Ku_new = Ku + apply_from_rows(blocks, row, col, d, n)
     after = relative_residual(f, Ku_new, free)
     return PatchCorrection(u_new, Ku_new, m, before, after, time.perf_counter() - t0)

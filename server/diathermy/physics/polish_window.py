@@ -21,6 +21,7 @@ import scipy.sparse.linalg as spla
 
 from diathermy.fem.energy_cg import EnergyCG, energy_cg
 from diathermy.fem.multigrid import deterministic_sa, v_cycle_preconditioner
+from diathermy.physics.patch_correction import apply_from_rows, block_rows_plan
 
 
 @dataclass(frozen=True)
@@ -64,14 +65,6 @@ def choose_box(
     while margin > 0 and nodes_in_box(points, lo - margin, hi + margin).size > max_nodes:
         margin = margin / 2 if margin > 1e-4 else 0.0
     return WindowBox(lo - margin, hi + margin, lo - margin / 2, hi + margin / 2)
-
-
-def block_rows_plan(indptr: np.ndarray, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Every stored block of the block rows ``nodes`` in a block pattern: (its position in the
-    data, the local row, 0..len(nodes)-1, it belongs to)."""
-    starts, counts = indptr[nodes], indptr[nodes + 1] - indptr[nodes]
-    positions = np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
-    return positions, np.repeat(np.arange(nodes.size), counts)
 
 
 def block_submatrix_plan(
@@ -130,10 +123,8 @@ class PolishWindow:
         window's own block rows (A symmetric: (A d)_c = sum_r A_rc^T d_r), not a global mat-vec."""
         rows_pos, row_of = self.rows
         d = np.reshape(delta, (-1, 3))
-        Ad = np.einsum("bji,bj->bi", A.data[rows_pos], d[row_of])
-        cols = A.indices[rows_pos]
         n = A.shape[0] // 3
-        return np.column_stack([np.bincount(cols, Ad[:, i], minlength=n) for i in range(3)]).ravel()
+        return apply_from_rows(A.data[rows_pos], row_of, A.indices[rows_pos], d, n).ravel()
 
 
 def build_window(
