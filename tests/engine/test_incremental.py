@@ -117,25 +117,6 @@ def test_full_interval(every):
         assert run_length < every
 
 
-def test_the_interval_full_solve_starts_from_the_local_answer():
-    """The interval's full solve starts where the local path gets (patched, polished on its
-    window), and takes fewer CG iterations than from the patched prediction alone (no window)."""
-    base = {"full_every": 3, "guard": "energy"}
-    runs = {}
-    for name, window in (("window", 0.016), ("raw", 0.0)):
-        sim = Simulation(tiny_scene(mechanics={**base, "polish_window_m": window}))
-        runs[name] = [r.effects["mechanics"] for r in sim.run(STEPS)]
-    fulls = [
-        (w, r)
-        for w, r in zip(runs["window"], runs["raw"], strict=True)
-        if w.ran and "interval" in str(w.extra.get("why", ""))
-    ]
-    assert fulls
-    for w, _ in fulls:
-        assert "polished on its window" in str(w.extra["full_start"])
-    assert sum(w.iterations for w, _ in fulls) < sum(r.iterations for _, r in fulls)
-
-
 def test_rescaled_strain_energy_is_the_recomputed_one():
     """On a local step W is alpha^2 x the last W away from the patch and the cut: the same as
     W of the new displacement recomputed on every tet."""

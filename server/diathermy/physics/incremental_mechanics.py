@@ -189,26 +189,6 @@ class IncrementalFEMBackend:
         )
         return (x * s).reshape(-1, 3), r
 
-    def _interval_start(
-        self,
-        solver: MechanicsSolver,
-        pressure_pa: np.ndarray,
-        level_set_m: np.ndarray,
-        warm_start: np.ndarray | None,
-        extra: dict[str, float | int | bool | str],
-    ) -> np.ndarray | None:
-        """Where the interval's full solve starts: the local path's answer (the prediction,
-        patched and polished on its window), not the raw last displacement, so the full solve
-        only takes what the local path could not do."""
-        f = solver.load(pressure_pa, self.fem.p0_pa).reshape(-1, 3)
-        start, _, _ = self._start(solver, f, pressure_pa, level_set_m, warm_start)
-        if start is None:
-            return warm_start
-        u, _ = self._windowed(solver, f, self._local(solver, start, f, warm_start), extra)
-        how = "patched and polished on its window" if "window_nodes" in extra else "patched"
-        extra.update(full_start=f"{start.name}, {how}")
-        return u
-
     def _local(
         self, solver: MechanicsSolver, start: Start, f: np.ndarray, warm_start: np.ndarray | None
     ) -> LocalSolve:
@@ -322,8 +302,6 @@ class IncrementalFEMBackend:
         why = self.full_reason(warm_start)
         extra: dict[str, float | int | bool | str] = {"operator_s": operator_s, "predictor": "none"}
         x0 = warm_start
-        if why is not None and why.startswith("interval:"):
-            x0 = self._interval_start(solver, pressure_pa, level_set_m, warm_start, extra)
         if why is None:
             f = solver.load(pressure_pa, self.fem.p0_pa).reshape(-1, 3)
             start, picked, considered = self._start(solver, f, pressure_pa, level_set_m, warm_start)

@@ -127,12 +127,11 @@ class SolverConfig(_Model):
 
     electric_rtol: Annotated[float, Field(gt=0, lt=1)] = 1e-9
     electric_energy_tolerance: Annotated[float, Field(gt=0, lt=1)] | None = Field(
-        1e-4,
+        1e-5,
         description="incremental: the potential is accepted once PCG from the last one with "
         "the kept AMG hierarchy estimates its relative energy-norm error at most this (the "
         "power it delivers to ~its square), else solved to electric_rtol; null: always to "
-        "electric_rtol. 1e-4 (was 1e-5): the same temperature error against full solves on "
-        "the built-in scenes' grids, 25 % less electric time on 0.4 mm (docs/realtime.md)",
+        "electric_rtol",
     )
     thermal_rtol: Annotated[float, Field(gt=0, lt=1)] = 1e-9
     coupling: Literal["staggered", "monolithic"] = "staggered"
