@@ -218,7 +218,7 @@ def _restore_hierarchies(ctx: EngineContext, solver: dict[str, np.ndarray]) -> N
     if isinstance(backend, IncrementalFEMBackend) and "mechanics_since_full" in solver:
         backend.since_full = int(solver["mechanics_since_full"])
         backend.last_E_pa = solver.get("mechanics_last_E")
-        backend.window = None
+        backend.windowed.window = None
         if "mechanics_window_box" in solver:
             box = np.asarray(solver["mechanics_window_box"])
             E = np.asarray(solver.get("mechanics_window_E", ()))

@@ -32,21 +32,14 @@ import scipy.sparse as sp
 
 from diathermy.fem.energy_cg import EnergyCG, energy_cg
 from diathermy.physics.local_solve import (
-    WINDOW_MAX_FRACTION,
     IncrementalSettings,
     LocalSolve,
     local_solve,
 )
-from diathermy.physics.mechanics import DEFAULT_AMG_OPTIONS, MechanicsSolver
+from diathermy.physics.mechanics import MechanicsSolver
 from diathermy.physics.mechanics_backend import FEMBackend, MechanicsOutput, Rescaled
 from diathermy.physics.patch_correction import node_graph
-from diathermy.physics.polish_window import (
-    PolishWindow,
-    WindowBox,
-    build_window,
-    choose_box,
-    window_correct,
-)
+from diathermy.physics.polish_window import PolishWindow, WindowedPolish
 from diathermy.physics.predictors import (
     DisplacementPredictor,
     PredictorName,
@@ -86,8 +79,7 @@ class IncrementalFEMBackend:
         self.n_full = 0
         self._forced: str | None = None
         self.last_E_pa: np.ndarray | None = None  # E per tet of the solve behind the warm start
-        self.window: PolishWindow | None = None  # the windowed polish's, kept while it serves
-        self.n_windows = 0
+        self.windowed = WindowedPolish(settings)
 
     def force_full(self, why: str) -> None:
         """Solve the next step in full, saying ``why``."""
@@ -135,60 +127,6 @@ class IncrementalFEMBackend:
         )
         return choice.start, choice.why, choice.considered
 
-    def _windowed(
-        self,
-        solver: MechanicsSolver,
-        f: np.ndarray,
-        local: LocalSolve,
-        extra: dict[str, float | int | bool | str],
-    ) -> tuple[np.ndarray, np.ndarray | None]:
-        """The local answer (n_nodes, 3) m corrected by PCG on a window around its patch, the
-        rest held (``polish_window``), and its residual on the scaled system (None: not known);
-        the answer as is when there is no window to solve on."""
-        A = solver.krylov.A
-        st = self.settings
-        if (
-            st.window_m == 0
-            or st.polish_iterations == 0
-            or solver.krylov.kept_preconditioner is None  # no global guard to check it
-            or local.patch_nodes.size == 0
-            or not isinstance(A, sp.bsr_matrix)
-            or A.blocksize != (3, 3)
-        ):
-            return local.u, None
-        t0 = time.perf_counter()
-        points = solver.mesh.points
-        change = points[local.patch_nodes]
-        lo, hi = change.min(axis=0), change.max(axis=0)
-        w = self.window
-        built = w is None or not w.box.holds(lo, hi) or not w.fits(A)
-        if built:
-            max_nodes = int(WINDOW_MAX_FRACTION * solver.mesh.n_nodes)
-            box = choose_box(points, local.patch_nodes, st.window_m, max_nodes)
-            w = self._build_window(solver, box)
-        assert w is not None
-        s = solver.scale
-        x0 = local.u.ravel() / s
-        b = f.ravel() * s
-        # the scaled residual s (f - K u) from the patch's K u: no global mat-vec
-        r = b - A @ x0 if local.Ku is None else s * (f.ravel() - local.Ku.ravel())
-        norm_sq = float(x0 @ (b - r))
-        tol = st.window_share * st.energy_tolerance
-        res = window_correct(w, A, r, norm_sq, tol=tol, maxiter=st.window_iterations)
-        if res.estimate > tol:
-            self.window = None  # stale for this change: the next step builds a new one
-        x = x0.copy()
-        x[w.dofs] += res.x
-        r = r - w.spread(A, res.x)
-        extra.update(
-            window_nodes=int(w.nodes.size),
-            window_built=built,
-            window_iterations=res.iterations,
-            window_estimate=res.estimate,
-            window_s=time.perf_counter() - t0,
-        )
-        return (x * s).reshape(-1, 3), r
-
     def _local(
         self, solver: MechanicsSolver, start: Start, f: np.ndarray, warm_start: np.ndarray | None
     ) -> LocalSolve:
@@ -198,39 +136,17 @@ class IncrementalFEMBackend:
         u_prev = warm_start if start.name == "previous" else None
         return local_solve(solver, start, f, self._graph, self.settings, u_prev)
 
-    def _build_window(self, solver: MechanicsSolver, box: WindowBox) -> PolishWindow:
-        """A new window on ``box`` for this topology's operator, kept as ``self.window``."""
-        A = solver.krylov.A
-        assert isinstance(A, sp.bsr_matrix)
-        self.window = build_window(
-            A,
-            solver.krylov.near_nullspace,
-            solver.mesh.points,
-            box,
-            DEFAULT_AMG_OPTIONS,
-            solver.youngs_modulus_pa,
-            solver.healthy,
-        )
-        self.n_windows += 1
-        return self.window
+    @property
+    def window(self) -> PolishWindow | None:
+        """The windowed polish's kept window (None: none yet, or it went stale)."""
+        return self.windowed.window
 
     def restore_window(
         self, box: np.ndarray, youngs_modulus_pa: np.ndarray, healthy: np.ndarray
     ) -> None:
         """Rebuild the window a checkpoint saved (its box (4, 3) m and the topology its
         hierarchy was built for), so the next polish repeats the original run's."""
-        fem = self.fem
-        solver = MechanicsSolver(
-            fem.mesh,
-            youngs_modulus_pa,
-            fem.poisson_ratio,
-            healthy=healthy,
-            ersatz_ratio=fem.ersatz_ratio,
-            rtol=fem.rtol,
-            assembler=fem.assembler,
-        )
-        self._build_window(solver, WindowBox.from_array(box))
-        self.n_windows -= 1  # not a new window: the saved one
+        self.windowed.restore(self.fem.fresh_operator(youngs_modulus_pa, healthy), box)
 
     def _polish(
         self,
@@ -333,7 +249,11 @@ class IncrementalFEMBackend:
                 if self.settings.guard == "residual"
                 else "energy guard"
             )
-            polished = self._polish(solver, f, *self._windowed(solver, f, local, extra))
+            polished = self._polish(
+                solver,
+                f,
+                *self.windowed.correct(solver, f, local.u, local.Ku, local.patch_nodes, extra),
+            )
             if polished is not None:
                 etol = self.settings.energy_tolerance
                 extra.update(

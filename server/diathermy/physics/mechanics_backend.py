@@ -146,6 +146,23 @@ class FEMBackend:
             self._assembler = mechanics_assembler(self.mesh)
         return self._assembler
 
+    def fresh_operator(
+        self, youngs_modulus_pa: np.ndarray, healthy: np.ndarray, **kw: Any
+    ) -> MechanicsSolver:
+        """A solver of this mesh for E (n_tets,) Pa and ``healthy``; by default with its own CG
+        solver, so the backend's kept operator and hierarchy are not touched (``kw``: the
+        solver's ``krylov``, ``base`` and ``consume_base``)."""
+        return MechanicsSolver(
+            self.mesh,
+            youngs_modulus_pa,
+            self.poisson_ratio,
+            healthy=healthy,
+            ersatz_ratio=self.ersatz_ratio,
+            rtol=self.rtol,
+            assembler=self.assembler,
+            **kw,
+        )
+
     def operator_for(
         self, youngs_modulus_pa: np.ndarray, healthy: np.ndarray
     ) -> tuple[MechanicsSolver, bool]:
@@ -157,17 +174,8 @@ class FEMBackend:
         ):
             return self._solver, False
         base, self._solver = self._solver, None  # a failed build must not leave it consumed
-        self._solver = MechanicsSolver(
-            self.mesh,
-            youngs_modulus_pa,
-            self.poisson_ratio,
-            healthy=healthy,
-            ersatz_ratio=self.ersatz_ratio,
-            rtol=self.rtol,
-            assembler=self.assembler,
-            krylov=self._krylov,
-            base=base,
-            consume_base=True,
+        self._solver = self.fresh_operator(
+            youngs_modulus_pa, healthy, krylov=self._krylov, base=base, consume_base=True
         )
         self._E = youngs_modulus_pa.copy()
         self.n_builds += 1

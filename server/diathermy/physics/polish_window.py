@@ -13,6 +13,7 @@ across topologies: a stale preconditioner only slows PCG.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +22,8 @@ import scipy.sparse.linalg as spla
 
 from diathermy.fem.energy_cg import EnergyCG, energy_cg
 from diathermy.fem.multigrid import deterministic_sa, v_cycle_preconditioner
+from diathermy.physics.local_solve import WINDOW_MAX_FRACTION, IncrementalSettings
+from diathermy.physics.mechanics import DEFAULT_AMG_OPTIONS, MechanicsSolver
 from diathermy.physics.patch_correction import apply_from_rows, block_rows_plan
 
 
@@ -185,3 +188,89 @@ def window_correct(
         maxiter=maxiter,
         norm_sq=norm_sq,
     )
+
+
+class WindowedPolish:
+    """An incremental backend's windowed polish: its kept window and the PCG on it
+    (``IncrementalSettings.window_m`` and the window knobs)."""
+
+    def __init__(self, settings: IncrementalSettings) -> None:
+        self.settings = settings
+        self.window: PolishWindow | None = None
+        self.n_built = 0
+
+    def correct(
+        self,
+        solver: MechanicsSolver,
+        f: np.ndarray,
+        u: np.ndarray,
+        Ku: np.ndarray | None,
+        change: np.ndarray,
+        extra: dict[str, float | int | bool | str],
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """u (n_nodes, 3) m corrected by PCG on a window around the nodes ``change`` (the
+        patch), the rest held, and its residual on the scaled system (None: not known); u as is
+        when there is no window to solve on. ``Ku``: K u (n_nodes, 3) N when known, f the load
+        (n_nodes, 3) N; what it did goes into ``extra``."""
+        A = solver.krylov.A
+        st = self.settings
+        if (
+            st.window_m == 0
+            or st.polish_iterations == 0
+            or solver.krylov.kept_preconditioner is None  # no global guard to check it
+            or change.size == 0
+            or not isinstance(A, sp.bsr_matrix)
+            or A.blocksize != (3, 3)
+        ):
+            return u, None
+        t0 = time.perf_counter()
+        points = solver.mesh.points
+        lo, hi = points[change].min(axis=0), points[change].max(axis=0)
+        w = self.window
+        built = w is None or not w.box.holds(lo, hi) or not w.fits(A)
+        if built:
+            max_nodes = int(WINDOW_MAX_FRACTION * solver.mesh.n_nodes)
+            w = self.build(solver, choose_box(points, change, st.window_m, max_nodes))
+        assert w is not None
+        s = solver.scale
+        x0 = u.ravel() / s
+        b = f.ravel() * s
+        # the scaled residual s (f - K u) from the patch's K u: no global mat-vec
+        r = b - A @ x0 if Ku is None else s * (f.ravel() - Ku.ravel())
+        tol = st.window_share * st.energy_tolerance
+        res = window_correct(w, A, r, float(x0 @ (b - r)), tol=tol, maxiter=st.window_iterations)
+        if res.estimate > tol:
+            self.window = None  # stale for this change: the next step builds a new one
+        x = x0.copy()
+        x[w.dofs] += res.x
+        extra.update(
+            window_nodes=int(w.nodes.size),
+            window_built=built,
+            window_iterations=res.iterations,
+            window_estimate=res.estimate,
+            window_s=time.perf_counter() - t0,
+        )
+        return (x * s).reshape(-1, 3), r - w.spread(A, res.x)
+
+    def build(self, solver: MechanicsSolver, box: WindowBox) -> PolishWindow:
+        """A new window on ``box`` for ``solver``'s operator, kept as ``self.window``."""
+        A = solver.krylov.A
+        if not isinstance(A, sp.bsr_matrix):
+            raise ValueError("the windowed polish needs the solver's block operator")
+        self.window = build_window(
+            A,
+            solver.krylov.near_nullspace,
+            solver.mesh.points,
+            box,
+            DEFAULT_AMG_OPTIONS,
+            solver.youngs_modulus_pa,
+            solver.healthy,
+        )
+        self.n_built += 1
+        return self.window
+
+    def restore(self, solver: MechanicsSolver, box: np.ndarray) -> None:
+        """The window a checkpoint saved: its box (4, 3) m on ``solver``, the operator of the
+        topology its hierarchy was built for."""
+        self.build(solver, WindowBox.from_array(box))
+        self.n_built -= 1  # not a new window: the saved one
