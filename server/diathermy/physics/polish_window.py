@@ -197,7 +197,6 @@ class WindowedPolish:
     def __init__(self, settings: IncrementalSettings) -> None:
         self.settings = settings
         self.window: PolishWindow | None = None
-        self.n_built = 0
 
     def correct(
         self,
@@ -266,11 +265,9 @@ class WindowedPolish:
             solver.youngs_modulus_pa,
             solver.healthy,
         )
-        self.n_built += 1
         return self.window
 
     def restore(self, solver: MechanicsSolver, box: np.ndarray) -> None:
         """The window a checkpoint saved: its box (4, 3) m on ``solver``, the operator of the
         topology its hierarchy was built for."""
         self.build(solver, WindowBox.from_array(box))
-        self.n_built -= 1  # not a new window: the saved one
