@@ -10,6 +10,7 @@ import pytest
 from diathermy.engine.backends import fem_of
 from diathermy.engine.simulation import Simulation
 from diathermy.errors import CheckpointError, SceneError
+from diathermy.physics.electric import joule_heat
 from diathermy.scene import AccuracyBudget, Electrode
 
 from .scenes import tiny_scene
@@ -65,6 +66,30 @@ def test_fixed_electrode_reuses_potential_until_the_cut():
     assert sim.calls["electric"] == 10
     assert sim.potential.solver.krylov.n_solves == 1  # one unit-current solve, reused 9 times
     assert "reused" in sim.last_report.effects["electric"].reason
+
+
+def test_reused_potential_scales_its_joule_heat_and_load():
+    """While the unit field is reused its Joule heat and nodal load are scaled by I^2, not
+    recomputed: the same q as sigma |grad V|^2 of the step's V, through a change of drive."""
+    scene = tiny_scene(
+        effects=["electric", "thermal"],
+        electrodes=[Electrode(name="e", position_m=(0.01, 0.005), power_w=30.0, drive="power")],
+    )
+    sim = Simulation(scene)
+    sim.run(3)
+    sim.set_electrode("e", power_w=12.0)
+    for _ in range(2):
+        joule_before = sim.last_report.energy["joule_in"]
+        rep = sim.step()
+        # the heat step took the handed-on nodal load: the ledger books the set power
+        assert rep.energy["joule_in"] - joule_before == pytest.approx(12.0 * scene.dt_s, rel=1e-9)
+        assert "reused" in rep.effects["electric"].reason
+        V, q = sim.state["potential"], sim.state["joule_heat"]
+        sigma = np.full(sim.ctx.disc.n_tets, sim.tissue.sigma_s_per_m)
+        assert np.abs(q - joule_heat(sim.ctx.disc.gradient, sigma, V)).max() <= 1e-12 * q.max()
+        load = sim.ctx.heat.hmesh.joule_load(q)
+        assert load.sum() == pytest.approx(12.0, rel=1e-9)  # the set power, to round-off
+    assert sim.potential.solver.krylov.n_solves == 1
 
 
 def test_coagulation_matches_full_scene_until_first_vaporization():

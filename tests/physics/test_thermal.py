@@ -9,7 +9,7 @@ from diathermy.errors import SceneError
 from diathermy.fem.edges import edge_stiffness
 from diathermy.fem.geometry import structured_geometry
 from diathermy.mesh import Grid, build_tet_mesh
-from diathermy.physics.heat_operator import assemble_heat_operator, heat_mesh
+from diathermy.physics.heat_operator import assemble_heat_operator, heat_mesh, heat_rhs
 from diathermy.physics.thermal import HeatStepper
 from tests.physics.convective_column import T_INF_K, T_INITIAL_K, column_max_error
 
@@ -79,6 +79,31 @@ def test_maximum_principle(cube, dt):
         T = res.T
     fell_back = res.stats.fallback_nodes.size
     assert (fell_back > 0) == (dt == 10.0)  # CN is kept wherever it is monotone
+
+
+@pytest.mark.parametrize("dt", [0.03, 10.0])
+def test_rhs_from_the_matrix_is_the_edge_form(cube, rng, dt):
+    """heat_rhs reads K_(1-theta) T off the step's matrix (and the fallback's steep edges): the
+    same right-hand side as the explicit half summed over every edge, with and without theta
+    raised above 1/2."""
+    mesh, hm = cube
+    h = {"z+": 25.0, "x-": 10.0, "x+": 5.0, "y-": 0.0, "y+": 40.0, "z-": 0.0}
+    stepper = HeatStepper(hm, h_w_per_m2_k=h, t_ambient_k=T_AMB)
+    rho_c = RHO_C * rng.uniform(0.8, 1.2, mesh.n_nodes)
+    k = K_TISSUE * rng.uniform(0.5, 2.0, mesh.n_tets)
+    op, _ = stepper.operator(dt, rho_c, k)
+    assert (op.steep_edges.size > 0) == (dt == 10.0)
+    T = rng.uniform(300.0, 380.0, mesh.n_nodes)
+    load = rng.normal(size=mesh.n_nodes)
+    edge_form = (
+        op.mass / op.dt_s * T
+        - hm.stiffness.apply((1.0 - op.theta_edge) * op.w, T)
+        - (1.0 - op.theta) * op.robin * T
+        + op.robin * T_AMB
+        + load
+    )
+    rhs = heat_rhs(op, hm.stiffness, T, T_AMB, load)
+    assert np.abs(rhs - edge_form).max() <= 1e-12 * np.abs(op.mass / op.dt_s * T).max()
 
 
 def test_plain_crank_nicolson_is_not_monotone_at_large_steps(cube):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -12,6 +13,7 @@ from diathermy.fem.geometry import (
     gradient_matrix,
     nodal_volumes,
     structured_geometry,
+    tet_mean_matrix,
 )
 from diathermy.fem.sparsity import Pattern, build_pattern
 from diathermy.mesh import SIDES, Grid, TetMesh, build_tet_mesh
@@ -37,6 +39,11 @@ class Discretization:
     @property
     def n_tets(self) -> int:
         return self.mesh.n_tets
+
+    @cached_property
+    def tet_mean(self) -> sp.csr_matrix:
+        """(n_tets, n_nodes): a nodal scalar field's mean per tet, built on first use."""
+        return tet_mean_matrix(self.mesh.tets, self.mesh.n_nodes)
 
     def to_grid(self, nodal: np.ndarray) -> np.ndarray:
         """Nodal (n_nodes,) or (n_nodes, 3) -> grid-shaped (nz, ny, nx[, 3])."""

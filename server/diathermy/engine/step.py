@@ -33,6 +33,8 @@ class Step:
     at the start of the step. rho_c: the volumetric heat capacity (J/(m^3 K)) the thermal step
     used, which vaporization's energy balance must reuse. monolithic: the electric solve
     deferred to the thermal step. delivered_power_w: the power the electric solve delivered.
+    joule_load_w: the nodal load (n_nodes,) in W of this step's Joule heat, where the electric
+    effect has it (scaled from the reused unit field); None: the thermal step sums it.
     """
 
     dt: float
@@ -41,6 +43,7 @@ class Step:
     rho_c: np.ndarray | None = None
     monolithic: MonolithicRequest | None = None
     delivered_power_w: float = 0.0
+    joule_load_w: np.ndarray | None = None
 
 
 @dataclass

@@ -52,6 +52,18 @@ def gradient_matrix(geom: ElementGeometry, tets: np.ndarray, n_nodes: int) -> sp
     )
 
 
+def tet_mean_matrix(tets: np.ndarray, n_nodes: int) -> sp.csr_matrix:
+    """The mean of the 4 nodal values per tet as a sparse matrix (n_tets, n_nodes): ``P @ v`` is
+    ``physics.properties.nodes_to_tets(v, tets)`` for a scalar field, at about 2.5x its speed
+    (measured on 393k tets: 3.1 against 7.8 ms; the gather of ``v[tets]`` is what costs)."""
+    n = tets.shape[0]
+    index = np.int32 if 4 * n < np.iinfo(np.int32).max else np.int64
+    return sp.csr_matrix(
+        (np.full(4 * n, 0.25), tets.ravel().astype(index), np.arange(0, 4 * n + 1, 4, dtype=index)),
+        shape=(n, n_nodes),
+    )
+
+
 def nodal_volumes(geom: ElementGeometry, tets: np.ndarray, n_nodes: int) -> np.ndarray:
     """Lumped (row-sum) nodal volume (n_nodes,) in m^3: a quarter of each adjacent tet."""
     return np.bincount(tets.ravel(), np.repeat(geom.volumes / 4.0, 4), minlength=n_nodes)

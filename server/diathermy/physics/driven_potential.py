@@ -9,6 +9,7 @@ guarded one).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
 
@@ -58,6 +59,7 @@ class DrivenPotential:
         self._contact: ContactWeights | None = None
         self._unit: tuple[np.ndarray, np.ndarray, float] | None = None  # V1, load1, R
         self._version = -1  # the solver's operator version that V1 belongs to
+        self._derived: dict[str, np.ndarray] = {}  # of the cached V1 (``per_unit``)
 
     def cached_unit_field(
         self,
@@ -73,6 +75,18 @@ class DrivenPotential:
         """Seed the cache (e.g. from a checkpoint); the conductivity must already be set."""
         self._contact, self._unit = contact, unit
         self._version = self.solver.version
+        self._derived = {}
+
+    def per_unit(self, name: str, make: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+        """A field derived linearly or quadratically from the cached unit-current field V1
+        (``make(V1)``, e.g. its Joule heat), computed once per V1: a drive then scales it
+        (I or I^2) instead of recomputing it every step the potential is reused."""
+        if self._unit is None:
+            raise SceneError("potential: per_unit before any unit field")
+        value = self._derived.get(name)
+        if value is None:
+            value = self._derived[name] = make(self._unit[0])
+        return value
 
     def unit_field(
         self, sigma: np.ndarray | float, contact: ContactWeights
@@ -90,6 +104,7 @@ class DrivenPotential:
         R = self.solver.dissipation(V1)
         self._contact, self._unit = contact, (V1, load1, R)
         self._version = self.solver.version
+        self._derived = {}
         return V1, load1, R, stats
 
     def solve(

@@ -18,7 +18,6 @@ from diathermy.engine.state import ContactKey, SimulationState
 from diathermy.engine.step import MonolithicRequest, Outcome, Step
 from diathermy.physics.contact_load import ContactWeights
 from diathermy.physics.electric import joule_heat
-from diathermy.physics.properties import nodes_to_tets
 from diathermy.physics.tissue_effects import electrical_conductivity
 
 NO_CONTACT = (
@@ -34,7 +33,7 @@ def conductivity(ctx: EngineContext, state: SimulationState) -> np.ndarray:
         sigma_n = electrical_conductivity(
             state["temperature"], state["vapor_fraction"], t, ctx.conductivity_law
         )
-        sigma = nodes_to_tets(sigma_n, ctx.disc.mesh.tets)
+        sigma = ctx.disc.tet_mean @ sigma_n
     else:
         sigma = np.full(ctx.disc.n_tets, t.sigma_s_per_m)
     sigma[state["removed"]] = t.sigma_removed_s_per_m
@@ -86,11 +85,15 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
             handoff={"monolithic": MonolithicRequest(sigma, contact, drive)},
         )
     sol = ctx.potential.solve(sigma, contact, drive)
-    fields = {
-        "potential": sol.V,
-        "joule_heat": joule_heat(ctx.disc.gradient, sigma, sol.V),
-    }
-    handoff = {"delivered_power_w": sol.power_w}
+    # q is quadratic in the current: the unit field's Joule heat (and, for the heat step, its
+    # nodal load) is computed once per unit field and scaled by I^2 while the field is reused
+    i2 = sol.current_a**2
+    q1 = ctx.potential.per_unit("joule_heat", lambda V1: joule_heat(ctx.disc.gradient, sigma, V1))
+    fields = {"potential": sol.V, "joule_heat": i2 * q1}
+    handoff: dict[str, Any] = {"delivered_power_w": sol.power_w}
+    if ctx.has("thermal"):
+        load1 = ctx.potential.per_unit("joule_load", lambda _: ctx.heat.hmesh.joule_load(q1))
+        handoff["joule_load_w"] = i2 * load1
     if sol.stats.cached:
         report = EffectReport(
             False,

@@ -13,11 +13,7 @@ from diathermy.engine.context import EngineContext
 from diathermy.engine.report import EffectReport
 from diathermy.engine.state import SimulationState
 from diathermy.engine.step import Outcome, Step, skipped
-from diathermy.physics.properties import (
-    effective_conductivity,
-    nodes_to_tets,
-    volumetric_heat_capacity,
-)
+from diathermy.physics.properties import effective_conductivity, volumetric_heat_capacity
 
 
 def skip(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome | None:
@@ -32,7 +28,10 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
     t = ctx.tissue
     x = state["vapor_fraction"]
     rho_c = volumetric_heat_capacity(x, state["pressure"], step.T_old, t)
-    k = nodes_to_tets(effective_conductivity(x, t), ctx.disc.mesh.tets)
+    if x.any():
+        k = ctx.disc.tet_mean @ effective_conductivity(x, t)
+    else:  # no vapor yet: the liquid-phase mixture everywhere
+        k = np.full(ctx.disc.n_tets, float(effective_conductivity(0.0, t)))
     k[state["removed"]] = t.k_vapor_w_per_m_k
     if step.monolithic is not None:
         req = step.monolithic
@@ -61,7 +60,14 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
             heat=mono.energy,
             handoff={"rho_c": rho_c, "monolithic": None, "delivered_power_w": mono.power_w},
         )
-    res = ctx.heat.step(step.T_old, step.dt, rho_c=rho_c, k=k, q=state["joule_heat"])
+    res = ctx.heat.step(
+        step.T_old,
+        step.dt,
+        rho_c=rho_c,
+        k=k,
+        q=state["joule_heat"],
+        joule_load_w=step.joule_load_w,
+    )
     return Outcome(
         EffectReport(
             True,
