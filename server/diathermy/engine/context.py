@@ -52,6 +52,7 @@ class EngineContext:
                 energy_tolerance=scene.solver.electric_energy_tolerance
                 if scene.solver.incremental
                 else None,
+                window_m=scene.solver.electric_window_m if scene.solver.incremental else 0.0,
                 stale_factor=POTENTIAL_STALE_FACTOR,
                 max_stale_solves=POTENTIAL_MAX_STALE_SOLVES,
             )

@@ -22,52 +22,10 @@ import scipy.sparse.linalg as spla
 
 from diathermy.fem.energy_cg import EnergyCG, energy_cg
 from diathermy.fem.multigrid import deterministic_sa, v_cycle_preconditioner
+from diathermy.fem.window_box import WindowBox, choose_box, nodes_in_box
 from diathermy.physics.local_solve import WINDOW_MAX_FRACTION, IncrementalSettings
 from diathermy.physics.mechanics import DEFAULT_AMG_OPTIONS, MechanicsSolver
 from diathermy.physics.patch_correction import apply_from_rows, block_rows_plan
-
-
-@dataclass(frozen=True)
-class WindowBox:
-    """The window's box (lo, hi) and the inner box the change may move in before a new window,
-    each corner (3,) in m."""
-
-    lo: np.ndarray
-    hi: np.ndarray
-    inner_lo: np.ndarray
-    inner_hi: np.ndarray
-
-    def holds(self, lo: np.ndarray, hi: np.ndarray) -> bool:
-        """Whether a change inside [lo, hi] may keep this window."""
-        return bool(np.all(lo >= self.inner_lo) and np.all(hi <= self.inner_hi))
-
-    def as_array(self) -> np.ndarray:
-        """(4, 3): lo, hi, inner lo, inner hi (what a checkpoint stores)."""
-        return np.stack([self.lo, self.hi, self.inner_lo, self.inner_hi])
-
-    @classmethod
-    def from_array(cls, a: np.ndarray) -> WindowBox:
-        a = np.asarray(a, dtype=float).reshape(4, 3)
-        return cls(a[0].copy(), a[1].copy(), a[2].copy(), a[3].copy())
-
-
-def nodes_in_box(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Indices of the points (n, 3) m inside the closed box [lo, hi], ascending."""
-    return np.flatnonzero(np.all((points >= lo) & (points <= hi), axis=1))
-
-
-def choose_box(
-    points: np.ndarray, change: np.ndarray, margin_m: float, max_nodes: int
-) -> WindowBox:
-    """The box around the nodes ``change`` grown by ``margin_m`` on every side, the margin halved
-    until at most ``max_nodes`` nodes lie inside (down to the change's own box); the inner box
-    is grown by half the margin used."""
-    P = points[change]
-    lo, hi = P.min(axis=0), P.max(axis=0)
-    margin = float(margin_m)
-    while margin > 0 and nodes_in_box(points, lo - margin, hi + margin).size > max_nodes:
-        margin = margin / 2 if margin > 1e-4 else 0.0
-    return WindowBox(lo - margin, hi + margin, lo - margin / 2, hi + margin / 2)
 
 
 def block_submatrix_plan(

@@ -133,6 +133,13 @@ class SolverConfig(_Model):
         "power it delivers to ~its square), else solved to electric_rtol; null: always to "
         "electric_rtol",
     )
+    electric_window_m: Annotated[float, Field(ge=0, le=1)] = Field(
+        2e-3,
+        description="incremental: before that PCG the last potential is corrected exactly "
+        "(sparse LU) on the nodes around its residual grown by this margin in m, halved "
+        "until at most 4000 nodes; 0: no window (the accuracy is the energy tolerance's "
+        "either way)",
+    )
     thermal_rtol: Annotated[float, Field(gt=0, lt=1)] = 1e-9
     coupling: Literal["staggered", "monolithic"] = "staggered"
     incremental: bool = Field(

@@ -110,11 +110,17 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
         }
         if st.energy_estimate is not None:
             tol = ctx.scene.solver.electric_energy_tolerance
+            window = (
+                f"corrected exactly on the {st.window_nodes} nodes around its residual, then "
+                if st.window_nodes
+                else ""
+            )
             extra.update(
                 energy_estimate=st.energy_estimate,
                 energy_tolerance=tol,
+                window_nodes=st.window_nodes,
                 mode="local",
-                why=f"{st.iterations} CG iterations from the last potential with the kept "
+                why=f"the last potential {window}{st.iterations} CG iterations with the kept "
                 f"hierarchy: energy-error estimate {st.energy_estimate:.1e} <= {tol:.0e}",
             )
         else:
