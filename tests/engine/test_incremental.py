@@ -117,11 +117,16 @@ def test_full_interval(every):
         assert run_length < every
 
 
-def test_rescaled_strain_energy_is_the_recomputed_one():
-    """On a local step W is alpha^2 x the last W away from the patch and the cut: the same as
-    W of the new displacement recomputed on every tet."""
-    sim = Simulation(tiny_scene())
-    locals_seen = 0
+@pytest.mark.parametrize("grid", ["uniform", "graded"])
+def test_rescaled_strain_energy_is_the_recomputed_one(grid):
+    """On a local step W is alpha^2 x the last W away from the patch, the polish window and the
+    cut: the same as W of the new displacement recomputed on every tet (graded: the energy
+    guard's steps, the window's answer taken as it is)."""
+    from diathermy.scene import Resolution
+
+    graded = {"resolution": Resolution(fine_m=1.5e-3, margin_m=1e-3, depth_m=3e-3)}
+    sim = Simulation(tiny_scene(**(graded if grid == "graded" else {})))
+    locals_seen = windows_seen = 0
     for _ in range(STEPS):
         r = sim.step()
         mech = r.effects["mechanics"]
@@ -139,7 +144,9 @@ def test_rescaled_strain_energy_is_the_recomputed_one():
         got = sim.state["strain_energy"]
         assert np.abs(got - W).max() <= 1e-12 * W.max(), r.step
         locals_seen += 1
+        windows_seen += mech.extra.get("window_nodes", 0) > 0
     assert locals_seen >= 3
+    assert windows_seen > 0  # the window path (its nodes added to the updated ones) ran
 
 
 def test_graded_grid_takes_the_energy_guard():

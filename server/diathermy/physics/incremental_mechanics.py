@@ -180,12 +180,13 @@ class IncrementalFEMBackend:
         residual: float,
         rebuilt: bool,
         local: LocalSolve,
-        rescaled: bool,
+        moved: np.ndarray | None,
         extra: dict[str, float | int | bool | str],
         iterations: int = 0,
     ) -> MechanicsOutput:
-        """The predictor's answer u (n_nodes, 3) m taken as this step's; ``rescaled``: u is the
-        Ritz-scaled warm start but on the patch (its strain energy is updated, not recomputed)."""
+        """The predictor's answer u (n_nodes, 3) m taken as this step's; ``moved``: u is the
+        Ritz-scaled warm start but on these nodes (the patch, the window), so its strain energy
+        is updated there, not recomputed; None: u moved everywhere."""
         self.since_full += 1
         self.n_local += 1
         loose = solver.fragments.loose
@@ -198,8 +199,8 @@ class IncrementalFEMBackend:
             rebuilt=rebuilt,
             loose_tets=loose if loose.any() else None,
             rescaled=None
-            if previous_E is None or not rescaled
-            else Rescaled(local.ritz_scale, local.patch_nodes, previous_E),
+            if previous_E is None or moved is None
+            else Rescaled(local.ritz_scale, moved, previous_E),
             extra=extra,
         )
 
@@ -240,20 +241,17 @@ class IncrementalFEMBackend:
             tol = self.settings.guard_tolerance
             if self.settings.guard == "residual" and local.residual <= tol:
                 extra.update(why=f"residual {local.residual:.1e} <= {tol:.0e}", guard_tolerance=tol)
-                rescaled = persistence
-                return self._accept(
-                    solver, local.u, local.residual, rebuilt, local, rescaled, extra
-                )
+                moved = local.patch_nodes if persistence else None
+                return self._accept(solver, local.u, local.residual, rebuilt, local, moved, extra)
             why = (
                 f"residual {local.residual:.1e} > {tol:.0e} after the patch"
                 if self.settings.guard == "residual"
                 else "energy guard"
             )
-            polished = self._polish(
-                solver,
-                f,
-                *self.windowed.correct(solver, f, local.u, local.Ku, local.patch_nodes, extra),
+            u_window, r_window, window_nodes = self.windowed.correct(
+                solver, f, local.u, local.Ku, local.patch_nodes, extra
             )
+            polished = self._polish(solver, f, u_window, r_window)
             if polished is not None:
                 etol = self.settings.energy_tolerance
                 extra.update(
@@ -267,9 +265,15 @@ class IncrementalFEMBackend:
                         why=f"{why}; {polished.iterations} CG iterations with the kept "
                         f"hierarchy: energy-error estimate {polished.estimate:.1e} <= {etol:.0e}",
                     )
-                    u = (polished.x * solver.scale).reshape(-1, 3)
+                    moved = None
+                    if polished.iterations == 0:  # the window's answer as it is
+                        u = u_window
+                        if persistence:
+                            moved = np.union1d(local.patch_nodes, window_nodes)
+                    else:
+                        u = (polished.x * solver.scale).reshape(-1, 3)
                     return self._accept(
-                        solver, u, polished.residual, rebuilt, local, False, extra,
+                        solver, u, polished.residual, rebuilt, local, moved, extra,
                         iterations=polished.iterations,
                     )  # fmt: skip
                 why = (

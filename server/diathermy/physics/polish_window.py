@@ -164,11 +164,12 @@ class WindowedPolish:
         Ku: np.ndarray | None,
         change: np.ndarray,
         extra: dict[str, float | int | bool | str],
-    ) -> tuple[np.ndarray, np.ndarray | None]:
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
         """u (n_nodes, 3) m corrected by PCG on a window around the nodes ``change`` (the
-        patch), the rest held, and its residual on the scaled system (None: not known); u as is
-        when there is no window to solve on. ``Ku``: K u (n_nodes, 3) N when known, f the load
-        (n_nodes, 3) N; what it did goes into ``extra``."""
+        patch), the rest held (bit for bit), its residual on the scaled system (None: not
+        known) and the window's nodes; u as is (and no nodes) when there is no window to solve
+        on. ``Ku``: K u (n_nodes, 3) N when known, f the load (n_nodes, 3) N; what it did goes
+        into ``extra``."""
         A = solver.krylov.A
         st = self.settings
         if (
@@ -179,7 +180,7 @@ class WindowedPolish:
             or not isinstance(A, sp.bsr_matrix)
             or A.blocksize != (3, 3)
         ):
-            return u, None
+            return u, None, np.zeros(0, dtype=np.int64)
         t0 = time.perf_counter()
         points = solver.mesh.points
         lo, hi = points[change].min(axis=0), points[change].max(axis=0)
@@ -198,8 +199,9 @@ class WindowedPolish:
         res = window_correct(w, A, r, float(x0 @ (b - r)), tol=tol, maxiter=st.window_iterations)
         if res.estimate > tol:
             self.window = None  # stale for this change: the next step builds a new one
-        x = x0.copy()
-        x[w.dofs] += res.x
+        dofs = w.dofs
+        corrected = u.ravel().copy()
+        corrected[dofs] = (x0[dofs] + res.x) * s[dofs]
         extra.update(
             window_nodes=int(w.nodes.size),
             window_built=built,
@@ -207,7 +209,7 @@ class WindowedPolish:
             window_estimate=res.estimate,
             window_s=time.perf_counter() - t0,
         )
-        return (x * s).reshape(-1, 3), r - w.spread(A, res.x)
+        return corrected.reshape(-1, 3), r - w.spread(A, res.x), w.nodes
 
     def build(self, solver: MechanicsSolver, box: WindowBox) -> PolishWindow:
         """A new window on ``box`` for ``solver``'s operator, kept as ``self.window``."""
