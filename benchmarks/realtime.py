@@ -1,6 +1,7 @@
 """Real time (issue #25): what a cutting step costs, full against incremental, one command.
 
     python benchmarks/realtime.py run [--scenes NAME ...] [--grids own uniform] [--steps N] [--tight]
+        [--tolerances X ...]
     python benchmarks/realtime.py profile [--scenes default] [--grids own uniform] [--steps N]
     python benchmarks/realtime.py solvers [--grids 0 0.5] [--steps N] [--rounds N]
 
@@ -14,7 +15,9 @@ false: every effect solved in full every step, the reference), ``incremental`` (
 the mechanics from the previous displacement, Ritz-scaled, patch-corrected, a full solve when
 the residual check or the interval asks for it) and, on the uniform grid that has a shipped
 model, ``cnn`` (the CNN predictor with its patch); with ``--tight`` also the incremental mode
-without its windowed polish (``TIGHT_MODE``: every polish iteration over the whole block). Per mode: median and p90 wall time per step,
+without its windowed polish (``TIGHT_MODE``: every polish iteration over the whole block), and
+with ``--tolerances`` the incremental mode at each of those ``mechanics.energy_tolerance`` values
+(what a looser guard buys and costs). Per mode: median and p90 wall time per step,
 the real-time factor (dt / median wall), the median time of each effect, the mechanics' share
 of local steps, and against ``full`` at the same step the max and mean strain-energy error and
 the max temperature error, and the final cut-volume difference. Writes
@@ -187,16 +190,26 @@ TIGHT: dict[str, Any] = {"polish_window_m": 0.0}
 EFFECTS = ("electric", "thermal", "vaporization", "mechanics", "dissection")
 
 
-def modes_for(scene: Scene, tight: bool = False) -> list[str]:
+TOLERANCE_MODE = "incremental, energy_tolerance "
+"""``--tolerances``: the incremental mode with ``mechanics.energy_tolerance`` set to the value
+that follows this prefix in the mode's name."""
+
+
+def modes_for(scene: Scene, tight: bool = False, tolerances: tuple[float, ...] = ()) -> list[str]:
     """The modes that apply: the CNN only with mechanics on a grid with a shipped model;
-    ``tight``: also ``TIGHT_MODE`` where the scene has mechanics."""
+    ``tight``: also ``TIGHT_MODE``, ``tolerances``: a mode per mechanics energy tolerance,
+    where the scene has mechanics."""
     mech = "mechanics" in scene.closed_effects
     cnn = mech and scene.resolution is None and tuple(scene.grid) == UNIFORM
-    return [m for m in MODES if m != "cnn" or cnn] + ([TIGHT_MODE] if tight and mech else [])
+    extra = ([TIGHT_MODE] if tight else []) + [f"{TOLERANCE_MODE}{t:g}" for t in tolerances]
+    return [m for m in MODES if m != "cnn" or cnn] + (extra if mech else [])
 
 
 def load_mode(path: Path, mode: str) -> Simulation:
-    """The checkpoint continued in ``mode`` (a ``MODES`` key or ``TIGHT_MODE``)."""
+    """The checkpoint continued in ``mode`` (a ``MODES`` key, ``TIGHT_MODE`` or a
+    ``TOLERANCE_MODE``)."""
+    if mode.startswith(TOLERANCE_MODE):
+        return load_as(path, energy_tolerance=float(mode.removeprefix(TOLERANCE_MODE)))
     return load_as(path, **(TIGHT if mode == TIGHT_MODE else MODES[mode]))
 
 
@@ -235,7 +248,9 @@ def write_run(runs: dict, a: argparse.Namespace, started: str, out: Path = RESUL
         "# Real time: a cutting step, full against incremental",
         "",
         f"`python benchmarks/realtime.py run --scenes {' '.join(a.scenes)} --grids "
-        f"{' '.join(a.grids)} --steps {a.steps}{' --tight' if a.tight else ''}` (started "
+        f"{' '.join(a.grids)} --steps {a.steps}{' --tight' if a.tight else ''}"
+        f"{' --tolerances ' + ' '.join(f'{t:g}' for t in a.tolerances) if a.tolerances else ''}` "
+        "(started "
         f"{started}): each scene from its "
         "checkpoint two steps after the first cut (or after the warm-up where it does not cut), "
         f"{a.steps} steps per mode, the modes stepped in lockstep; every measured step is in the "
@@ -298,12 +313,18 @@ def plot_run(runs: dict, out: Path) -> None:
 
 
 def measure(
-    scene: Scene, path: Path, *, warmup: int, steps: int, tight: bool = False
+    scene: Scene,
+    path: Path,
+    *,
+    warmup: int,
+    steps: int,
+    tight: bool = False,
+    tolerances: tuple[float, ...] = (),
 ) -> dict[str, Any]:
     """``scene`` warmed up (checkpoint ``path``), then every mode that applies in lockstep."""
     path, first_cut = warm_up(scene, path, warmup)
     return {
-        "rec": run_modes(path, modes_for(scene, tight), steps),
+        "rec": run_modes(path, modes_for(scene, tight, tolerances), steps),
         "dt_s": scene.dt_s,
         "first_cut": first_cut,
         "nodes": int(np.prod(scene.node_shape)),
@@ -380,6 +401,13 @@ def main() -> None:
             action="store_true",
             help=f"run: also '{TIGHT_MODE}', the incremental mode without its windowed polish",
         )
+        r.add_argument(
+            "--tolerances",
+            nargs="+",
+            type=float,
+            default=[],
+            help="run: also the incremental mode at each of these mechanics.energy_tolerance",
+        )
     s = sub.add_parser("solvers", help="per-saving cost of a cutting step")
     s.add_argument("--grids", nargs="+", type=float, default=[0.0, 0.5], help="0: uniform")
     s.add_argument("--steps", type=int, default=6)
@@ -394,6 +422,7 @@ def main() -> None:
                 warmup=a.warmup,
                 steps=a.steps,
                 tight=a.tight,
+                tolerances=tuple(a.tolerances),
             )
             for n in a.scenes
             for g in a.grids

@@ -2,7 +2,9 @@
 and 16 clients against the engine's own rate, bytes per frame, and server memory under a slow
 client.
 
-    python benchmarks/service.py [--grids 17x17x33,33x33x65] [--seconds 4]
+    python benchmarks/service.py [--grids 17x17x33,default,33x33x65] [--seconds 4]
+
+``default`` in --grids is the default scene's own graded grid (its ``resolution``).
 
 Targets (issue 23): frames/s per client >= 0.9 x the engine's steps/s; the engine's steps/s with
 16 clients within 10 % of its rate with none; p99 control-to-frame <= 2 step times + 20 ms.
@@ -34,6 +36,7 @@ import httpx  # noqa: E402
 from websockets.asyncio.client import connect  # noqa: E402
 
 from benchmarks.service_client import RawStream  # noqa: E402
+from diathermy.scene.builtin import builtin_scene  # noqa: E402
 from diathermy.service.cpus import format_cpus, parse_cpus  # noqa: E402
 from diathermy.service.encoding import unpack  # noqa: E402
 
@@ -47,6 +50,11 @@ FIELDS = ["temperature", "displacement"]
 CLIENTS_PER_PROC = 4
 FULL_DECODE = False  # service_trace.py --full-decode: the old client
 STEADY = {"name": "default-electrothermal", "effects": ["electric", "thermal"]}
+DEFAULT_RESOLUTION = builtin_scene("default").resolution.model_dump(mode="json")  # type: ignore[union-attr]
+"""The default scene's graded grid (``--grids default``)."""
+DEFAULT_LABEL = (
+    "x".join(map(str, builtin_scene("default").node_shape)) + " (the default scene's graded grid)"
+)
 """The built-in default scene (50 W) without vaporization and mechanics: a steady step cost, so
 that rows compare like with like (with them, steps slow ~100x once the tissue boils)."""
 
@@ -140,8 +148,17 @@ class Server:
                 raise RuntimeError(f"the benchmark server was not ready after {timeout_s:.0f} s")
             time.sleep(0.1)
 
-    def session(self, grid: list[int], scene: dict[str, Any] | None = None) -> str:
-        body = {"scene": {**scene, "grid": grid}} if scene else {"builtin": "default", "grid": grid}
+    def session(self, grid: list[int] | None, scene: dict[str, Any] | None = None) -> str:
+        """A new session on ``grid`` (None: the default scene's own graded grid)."""
+        if grid is None:
+            own = {"resolution": DEFAULT_RESOLUTION}
+            body: dict[str, Any] = {"scene": {**(scene or {}), **own}}
+        else:
+            body = (
+                {"scene": {**scene, "grid": grid}}
+                if scene
+                else {"builtin": "default", "grid": grid}
+            )
         r = self.http.post("/v1/sessions", json=body)
         r.raise_for_status()
         return str(r.json()["id"])
@@ -301,7 +318,12 @@ def client_process(
     conn.close()
 
 
-def warm_session(server: Server, grid: list[int]) -> str:
+def parse_grid(text: str) -> list[int] | None:
+    """NZxNYxNX, or None for ``default`` (the default scene's own graded grid)."""
+    return None if text == "default" else [int(x) for x in text.split("x")]
+
+
+def warm_session(server: Server, grid: list[int] | None) -> str:
     """A fresh session of the steady scene, past its first step (the first electric solve)."""
     sid = server.session(grid, STEADY)
     server.http.post(f"/v1/sessions/{sid}/step", json={"n": 2}).raise_for_status()
@@ -380,7 +402,7 @@ def tree_cpu_s(pid: int) -> tuple[float, dict[int, float]]:
 
 
 def grid_rows(
-    server: Server, grid: list[int], clients: list[int], seconds: float, reps: int
+    server: Server, grid: list[int] | None, clients: list[int], seconds: float, reps: int
 ) -> tuple[float, list[dict[str, Any]]]:
     """Engine alone and 1, 4, 16 clients, interleaved ``reps`` times on fresh sessions (the
     machine is shared, so its load drifts); medians per row, the 16-client ratio per repetition."""
@@ -546,7 +568,7 @@ def slow_client_memory(server: Server, sid: str, seconds: float) -> dict[str, An
 def fan_table(grid: str, alone: float, fan: list[dict[str, Any]]) -> list[str]:
     """The streaming table of one grid, with the targets checked."""
     lines = [
-        f"### Grid {grid}",
+        f"### Grid {grid}" if grid != "default" else f"### Grid {DEFAULT_LABEL}",
         "",
         f"Engine alone (REST steps, no stream client): **{alone:.1f} steps/s** "
         f"({1e3 / alone:.1f} ms per step), median of {fan[0]['reps']} runs; the engine waited "
@@ -633,7 +655,8 @@ def write_report(
         "row (a control waits for the step in progress, then its own step).",
         "",
         "Scene: the built-in `default` (50 W) with only its electric and thermal effects, on "
-        "17x17x33 and on its own 33x33x65 grid: a steady cost per step, so that rows compare "
+        "the grids below (`default`: the scene's own graded grid, 1 mm under the electrode, "
+        f"{DEFAULT_LABEL.split(' ')[0]}): a steady cost per step, so that rows compare "
         "like with like (with vaporization and mechanics a step costs ~100x more once the "
         "tissue boils, which happens within a row). Frames carry temperature and displacement "
         "(float32 volume).",
@@ -666,7 +689,8 @@ def write_report(
         "",
         "CPU column: *server* is the server process (event loop, HTTP, journal), *engine* its "
         "engine processes, *clients* the benchmark's client processes. Every step moves 16 x the "
-        "frame over loopback (150 kB on 17x17x33, 1.2 MB on 33x33x65): the server's writes, "
+        "frame over loopback (150 kB on 17x17x33, 0.6 MB on the default grid, 1.2 MB on "
+        "33x33x65): the server's writes, "
         "the kernel's copies and the clients' reads take that much CPU besides the engine's "
         "(on the server's CPUs when placed). *Engine waits for a CPU*: the share of the "
         "row's wall time the engine process was runnable but not running (its run-queue delay, "
@@ -757,7 +781,9 @@ def main() -> None:
     c.add_argument("--port", type=int, required=True)
     c.add_argument("--data-dir", required=True)
     p.add_argument(
-        "--grids", default="17x17x33,33x33x65", help="session grids NZxNYxNX, comma-separated"
+        "--grids",
+        default="17x17x33,default,33x33x65",
+        help="session grids NZxNYxNX or 'default' (the default scene's graded grid), comma-separated",
     )
     p.add_argument("--slow-grid", default="17x17x33", help="grid of the slow-client run")
     p.add_argument("--seconds", default="3,6", help="seconds per row, per grid (comma-separated)")
@@ -793,10 +819,10 @@ def main() -> None:
             seconds = (seconds + [seconds[-1]] * len(grids))[: len(grids)]
             clients = [int(x) for x in args.clients.split(",")]
             for grid_text, secs in zip(grids, seconds, strict=True):
-                grid = [int(x) for x in grid_text.split("x")]
+                grid = parse_grid(grid_text)
                 alone, rows = grid_rows(server, grid, clients, secs, args.reps)
                 tables.append((grid_text, alone, rows))
-            first = [int(x) for x in args.grids.split(",")[0].split("x")]
+            first = parse_grid(args.grids.split(",")[0])
             sid = server.session(first, QUICK_CUT)
             server.step_until_cut(sid)
             sizes = asyncio.run(frame_sizes(server, sid))

@@ -32,12 +32,18 @@ def test_tiny_run_writes_its_table(bench: ModuleType, tmp_path: Path) -> None:
     assert bench.modes_for(scene) == ["full", "incremental"]  # no model for a 9x9x17 grid
     assert bench.modes_for(bench.scene_on("coagulation", "uniform")) == ["full", "incremental"]
     assert bench.modes_for(scene, tight=True)[-1] == bench.TIGHT_MODE
-    run = bench.measure(scene, tmp_path / "tiny.h5", warmup=40, steps=4, tight=True)
+    loose = f"{bench.TOLERANCE_MODE}0.01"
+    assert bench.modes_for(scene, tolerances=(1e-2,))[-1] == loose
+    run = bench.measure(
+        scene, tmp_path / "tiny.h5", warmup=40, steps=4, tight=True, tolerances=(1e-2,)
+    )
     assert run["first_cut"] is not None and (tmp_path / "tiny.json").exists()
     rec = run["rec"]
     assert rec["full"]["se_err"] == [0.0] * 4 and rec["full"]["local"] == [0.0] * 4
-    for mode in ("incremental", bench.TIGHT_MODE):  # the default and the settings before it
+    for mode in ("incremental", bench.TIGHT_MODE, loose):  # the default, the settings before it
         assert max(rec[mode]["se_err"]) <= 0.01 and max(rec[mode]["dT_k"]) <= 0.1
+    sim = bench.load_mode(tmp_path / "tiny.h5", loose)
+    assert sim.scene.mechanics.energy_tolerance == 1e-2
     assert rec["full"]["cut_m3"][-1] > 0 and all(t > 0 for t in rec["full"]["mechanics"])
     # the cached checkpoint is reused, with its first-cut step
     assert bench.warm_up(scene, tmp_path / "tiny.h5", 40)[1] == run["first_cut"]
@@ -49,9 +55,12 @@ def test_tiny_run_writes_its_table(bench: ModuleType, tmp_path: Path) -> None:
     bench.warm_up(other, tmp_path / "tiny.h5", 40)
     assert (tmp_path / "tiny.h5").stat().st_mtime_ns != mtime
     assert json.loads((tmp_path / "tiny.json").read_text())["scene"] == other.model_dump_json()
-    args = argparse.Namespace(scenes=["tiny"], grids=["own"], steps=4, tight=True)
+    args = argparse.Namespace(
+        scenes=["tiny"], grids=["own"], steps=4, tight=True, tolerances=[1e-2]
+    )
     bench.write_run({("tiny", "own"): run}, args, "now", out=tmp_path)
     table = (tmp_path / "realtime.md").read_text()
     assert "| tiny | 9x9x17 uniform | 1,377 |" in table and "| incremental |" in table
     assert f"| {bench.TIGHT_MODE} |" in table and "--tight" in table
+    assert f"| {loose} |" in table and "--tolerances 0.01" in table
     assert (tmp_path / "realtime.png").stat().st_size > 1000
