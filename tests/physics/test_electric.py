@@ -189,15 +189,15 @@ def test_window_corrected_start_saves_iterations_at_the_same_accuracy(paper_mesh
     """The guarded solve's start corrected exactly on the window around its residual: the
     window's rows then have no residual, the answer meets the same energy tolerance against the
     exact potential in fewer PCG iterations, and a window over the node cap is not used."""
-    mesh = paper_meshes[(33, 33, 65)]
+    mesh = paper_meshes[(17, 17, 33)]
     contact = contact_weights(mesh, PAPER_CENTER, A_M)
     c = mesh.centroids()
-    hot = np.linalg.norm(c - PAPER_CENTER, axis=1) < 0.008  # desiccated under the contact
+    hot = np.linalg.norm(c - PAPER_CENTER, axis=1) < 0.016  # desiccated under the contact
     sigma = np.where(hot, 0.2 * SIGMA, SIGMA)
     tol = 1e-5
     runs = {}
     for name, kw in (
-        ("window", {"energy_tolerance": tol, "window_m": 0.004}),
+        ("window", {"energy_tolerance": tol, "window_m": 0.008}),
         ("plain", {"energy_tolerance": tol}),
         ("exact", {"rtol": 1e-12}),
     ):
