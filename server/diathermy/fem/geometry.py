@@ -54,8 +54,8 @@ def gradient_matrix(geom: ElementGeometry, tets: np.ndarray, n_nodes: int) -> sp
 
 def tet_mean_matrix(tets: np.ndarray, n_nodes: int) -> sp.csr_matrix:
     """The mean of the 4 nodal values per tet as a sparse matrix (n_tets, n_nodes): ``P @ v`` is
-    ``physics.properties.nodes_to_tets(v, tets)`` for a scalar field, at about 2.5x its speed
-    (measured on 393k tets: 3.1 against 7.8 ms; the gather of ``v[tets]`` is what costs)."""
+    ``v[tets].mean(axis=1)`` for a nodal scalar v, at about 2.5x the gather's speed (measured on
+    393k tets: 3.1 against 7.8 ms)."""
     n = tets.shape[0]
     index = np.int32 if 4 * n < np.iinfo(np.int32).max else np.int64
     return sp.csr_matrix(

@@ -52,11 +52,3 @@ def volumetric_heat_capacity(
 ) -> ArrayF:
     """rho c in J/(m^3 K), the per-node coefficient of the heat step (and of the energy balance)."""
     return effective_density(x, p, T, tissue) * effective_heat_capacity(x, tissue)
-
-
-def nodes_to_tets(values: ArrayF, tets: ArrayF) -> ArrayF:
-    """Mean of the 4 nodal values per tet: values (n_nodes, ...) -> (n_tets, ...)."""
-    v = np.asarray(values)[np.asarray(tets)]
-    if v.ndim == 2:  # a scalar field: one BLAS product, several times faster than .mean
-        return v @ np.full(4, 0.25)
-    return v.mean(axis=1)
