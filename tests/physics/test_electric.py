@@ -219,12 +219,13 @@ def test_window_corrected_start_saves_iterations_at_the_same_accuracy(paper_mesh
     near = np.argsort(np.linalg.norm(mesh.points[free] - PAPER_CENTER, axis=1))[:5]
     b = A @ x0
     b[near] += 1e-3  # a residual on the 5 nodes nearest the contact
-    x1 = solver._window_corrected(A, b, x0)
+    x1, r1 = solver._window_corrected(A, b, x0)
     W = np.flatnonzero(x1 != x0)
     assert solver._window_nodes >= W.size > 5
     assert np.abs((b - A @ x1)[W]).max() <= 1e-9 * 1e-3
+    assert r1 is not None and np.abs(r1 - (b - A @ x1)).max() <= 1e-12 * np.abs(b).max()
     monkeypatch.setattr("diathermy.physics.electric.WINDOW_MAX_NODES", 10)
-    assert solver._window_corrected(A, b, x0) is x0 and solver._window_nodes == 0
+    assert solver._window_corrected(A, b, x0)[0] is x0 and solver._window_nodes == 0
 
 
 # --- analytic references -----------------------------------------------------------------------

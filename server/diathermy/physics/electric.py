@@ -219,29 +219,36 @@ class PotentialSolver:
             return None
         if x0.shape != b.shape:
             return None
-        x0 = self._window_corrected(A, b, x0)
-        return energy_cg(A, b, x0, M, tol=self.energy_tolerance, maxiter=self.energy_maxiter)
+        x0, r = self._window_corrected(A, b, x0)
+        return energy_cg(
+            A, b, x0, M, tol=self.energy_tolerance, maxiter=self.energy_maxiter, residual=r
+        )
 
-    def _window_corrected(self, A: sp.csr_matrix, b: np.ndarray, x0: np.ndarray) -> np.ndarray:
-        """x0 plus the exact correction on the window around its residual (``window_m``):
-        A_WW d = r_W, the rest held; x0 itself when there is no window (off, no residual)."""
+    def _window_corrected(
+        self, A: sp.csr_matrix, b: np.ndarray, x0: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """(x, b - A x): x0 plus the exact correction on the window around its residual
+        (``window_m``), A_WW d = r_W, the rest held; x0 itself when there is no window (off, no
+        residual). The residual is updated from the window's own rows (A is symmetric), so the
+        window costs one global mat-vec; None when none was computed."""
         self._window_nodes = 0
         if self.window_m <= 0:
-            return x0
+            return x0, None
         r = b - A @ x0
         peak = float(np.abs(r).max(initial=0.0))
         if not peak > 0:
-            return x0
+            return x0, r
         hot = np.flatnonzero(np.abs(r) > WINDOW_HOT * peak)
         box = choose_box(self._free_points, hot, self.window_m, WINDOW_MAX_NODES)
         W = nodes_in_box(self._free_points, box.lo, box.hi)
         if W.size > WINDOW_MAX_NODES:  # the change itself spans more: PCG over the block
-            return x0
-        sub = A[W][:, W].tocsc()
+            return x0, r
+        rows = A[W]
+        d = spla.splu(rows[:, W].tocsc()).solve(r[W])
         x = x0.copy()
-        x[W] += spla.splu(sub).solve(r[W])
+        x[W] += d
         self._window_nodes = int(W.size)
-        return x
+        return x, r - rows.T @ d
 
     def restore_hierarchy(self, sigma: np.ndarray, reuse: ReuseState) -> None:
         """Rebuild the AMG hierarchy of conductivity sigma (n_tets,) S/m with its reuse counters
