@@ -195,8 +195,10 @@ def run(
     default_steps: int,
     grid: list[int] | None = None,
     picture_too: bool = True,
+    redraws: int = 20,
 ) -> str:
-    """Both measurements (and the picture); writes and returns viewer.md."""
+    """Both measurements (``redraws`` re-applications each, and the picture); writes and
+    returns viewer.md."""
     grid = grid or [33, 33, 65]
     out_dir.mkdir(parents=True, exist_ok=True)
     results: dict[str, dict[str, Any]] = {}
@@ -217,7 +219,10 @@ def run(
                 server.step_until(info["id"], depth, steps)
                 page = browser.new_page(viewport={"width": 1280, "height": 760})
                 open_page(page, server, info["id"])
-                results[label] = {"nodes": info["grid"]["n_nodes"], **measure(page, seconds, 20)}
+                results[label] = {
+                    "nodes": info["grid"]["n_nodes"],
+                    **measure(page, seconds, redraws),
+                }
                 print(f"  {results[label]}", flush=True)
                 page.close()
             panel: dict[str, Any] = {}
@@ -228,12 +233,14 @@ def run(
         finally:
             browser.close()
             server.stop()
-    text = report(results, panel, seconds)
+    text = report(results, panel, seconds, redraws)
     (out_dir / "viewer.md").write_text(text, encoding="utf-8")
     return text
 
 
-def report(results: dict[str, dict[str, Any]], panel: dict[str, Any], seconds: float) -> str:
+def report(
+    results: dict[str, dict[str, Any]], panel: dict[str, Any], seconds: float, redraws: int = 20
+) -> str:
     (big, b), (small, s) = list(results.items())
     lines = [
         "# Viewer frame rate (headless Chromium, SwiftShader WebGL)",
@@ -244,11 +251,11 @@ def report(results: dict[str, dict[str, Any]], panel: dict[str, Any], seconds: f
         "stepped over REST until it has cut; the page then shows two streams (the cut surface,",
         "`region: surface`, and the tissue's top layer from `region: volume`, float32, every step).",
         "",
-        f"*Live* runs the session at the server's maximum rate for {seconds:.0f} s: frames received",
+        f"*Live* runs the session at the server's maximum rate for {seconds:g} s: frames received",
         "per second (both streams, two per step) are bounded by the engine's step rate; the page",
         "draws the newest of what arrived once per animation frame, so frames drawn per second",
         "(counting both streams) are bounded by the render time too. *Redraw* re-applies the",
-        "newest frames 20 times (msgpack decode, top layer and colours, cut-surface geometry,",
+        f"newest frames {redraws} times (msgpack decode, top layer and colours, cut-surface geometry,",
         "render, `readPixels` to wait for the GPU): what the viewer itself can draw.",
         "",
         "| grid | nodes | cut faces | live steps/s | live frames received/s | live frames drawn/s "

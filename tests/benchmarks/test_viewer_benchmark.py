@@ -18,7 +18,9 @@ def _load_benchmark():  # noqa: ANN202 (a module)
 
 def test_viewer_benchmark_runs_tiny_and_writes_its_table(tmp_path: Path) -> None:
     bench = _load_benchmark()
-    text = bench.run(tmp_path, seconds=1.0, default_steps=2, grid=[5, 5, 9], picture_too=False)
+    text = bench.run(
+        tmp_path, seconds=0.5, default_steps=2, grid=[5, 5, 9], picture_too=False, redraws=5
+    )
     assert (tmp_path / "viewer.md").read_text() == text
     rows = [ln for ln in text.splitlines() if ln.startswith("| 5x5x9") or ln.startswith("| 9x9x17")]
     assert len(rows) == 2, text

@@ -58,7 +58,7 @@ def run_schemathesis(live: LiveServer, tmp_path: Path) -> str:
             "--checks",
             ",".join(CHECKS),
             "--max-examples",
-            "30",
+            "15",
             # the coverage phase (every boundary of every schema, ~2000 requests, about a
             # minute here) is left to a manual run; fuzzing draws negative data too
             "--phases",
