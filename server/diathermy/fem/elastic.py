@@ -209,16 +209,20 @@ def eigenstress_load(
     ``pressure_excess_pa`` is the nodal p - p0 (n_nodes,); P1 integrated exactly against the
     constant div v of a tet: |T| mean_T(p - p0) grad N_a. ``tet_weight`` (n_tets,) scales the
     eigenstress per tet (0 where there is no tissue to carry a pore pressure). ``gradient``:
-    the mesh's ``gradient_matrix``, the same sum as G^T applied to q per axis, faster.
+    the mesh's ``gradient_matrix``, the same sum as G^T applied to q per axis, over the tets
+    with a non-zero q only (faster).
     """
     q = geom.volumes * (np.asarray(pressure_excess_pa, dtype=float)[tets] @ np.full(4, 0.25))
     if tet_weight is not None:
         q = q * tet_weight
     if gradient is not None:
-        per_axis = np.zeros((q.size, 3, 3))  # row 3e + k, column i: q_e where k == i
-        diag = np.arange(3)
-        per_axis[:, diag, diag] = q[:, None]
-        return np.asarray(gradient.T @ per_axis.reshape(-1, 3))
+        # only the tets with a pressure excess load the nodes (a few thousand of a million
+        # while the tissue boils): f_k = G_k^T q over their rows 3e + k
+        active = np.flatnonzero(q)
+        out = np.zeros((n_nodes, 3))
+        for k in range(3):
+            out[:, k] = gradient[3 * active + k].T @ q[active]
+        return out
     idx = tets.ravel()
     return np.column_stack(
         [

@@ -14,6 +14,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from diathermy.fem.elastic import rigid_body_modes
+from diathermy.fem.window_box import nodes_in_box
 from diathermy.mesh import TetMesh
 
 
@@ -108,7 +109,8 @@ def update_fragments(
     extent = float(np.max(corners.max(axis=1) - corners.min(axis=1)))
     lo = corners.min(axis=(0, 1)) - margin * extent
     hi = corners.max(axis=(0, 1)) + margin * extent
-    region = np.flatnonzero(healthy & np.all((centroids >= lo) & (centroids <= hi), axis=1))
+    inside = nodes_in_box(centroids, lo, hi)  # the tets whose centroid is in the box
+    region = inside[healthy[inside]]
     local = np.full(mesh.n_tets, -1, dtype=np.int64)
     local[region] = np.arange(region.size)
     nbr = mesh.neighbours[region]

@@ -106,6 +106,7 @@ class MechanicsSolver:
     fragments: Fragments
     healthy: np.ndarray
     _rows: np.ndarray  # block row of each stored block of K
+    _rigid_modes: np.ndarray  # rigid_body_modes of the mesh, shared along a chain of updates
 
     def __init__(
         self,
@@ -138,9 +139,11 @@ class MechanicsSolver:
         if healthy is None:
             healthy = E >= 1e-3 * E.max()
         healthy = np.asarray(healthy, dtype=bool)
-        B = rigid_body_modes(mesh.points)
         if base is not None and not base.updatable_to(self):
             base = None
+        # the mesh's rigid-body modes (3 n_nodes, 6), from the base when there is one
+        self._rigid_modes = rigid_body_modes(mesh.points) if base is None else base._rigid_modes
+        B = self._rigid_modes.copy()
         if base is None and np.linalg.matrix_rank(B[self.constrained]) < 6:
             raise SceneError("the constraints leave rigid-body motions of the block free")
         # the loose-fragment search of a cut: near the cut when that proves it (see fragments)
