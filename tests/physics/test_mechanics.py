@@ -227,7 +227,10 @@ def test_updated_stiffness_equals_a_fresh_build_bit_for_bit(graded, consume):
     the matrix, its scaling and the solution are exactly those of a fresh build; a consumed
     base (its matrices taken over, not copied) refuses to solve or be updated again."""
     if graded:
-        grid, radii = Grid.graded((0.08, 0.03, 0.06), (0.12, 0.07, 0.1), 0.008), (8e-3, 0.012, 0.016)
+        grid, radii = (
+            Grid.graded((0.08, 0.03, 0.06), (0.12, 0.07, 0.1), 0.008),
+            (8e-3, 0.012, 0.016),
+        )
     else:
         grid, radii = Grid((9, 9, 17)), (0.012, 0.02, 0.03)
     mesh = build_tet_mesh(grid)
