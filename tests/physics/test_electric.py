@@ -147,6 +147,39 @@ def test_potential_resolved_only_when_sigma_or_contact_change(paper_meshes):
     assert np.allclose(hotter.V, first.V / 1.1, rtol=1e-8, atol=1e-8 * first.V.max())
 
 
+@pytest.mark.parametrize("graded", [False, True])
+def test_conductivity_update_equals_a_fresh_assembly_bit_for_bit(paper_meshes, graded):
+    """A few tets' sigma changed (a crater growing, then a boiling node cooling back) updates
+    the last matrix, its scaling and weights in place of assembling them, exactly as a fresh
+    solver assembles them; a change of most tets assembles anew."""
+    if graded:
+        mesh = build_tet_mesh(Grid.graded((0.09, 0.04, 0.08), (0.11, 0.06, 0.1), 0.004))
+    else:
+        mesh = paper_meshes[(17, 17, 33)]
+    _, solver = setup(mesh)
+    c = mesh.centroids()
+    nearest = np.argsort(np.linalg.norm(c - PAPER_CENTER, axis=1))
+    sigma = np.full(mesh.n_tets, SIGMA)
+    solver.set_conductivity(sigma)
+    for count, value in ((12, 1e-5), (48, 1e-5), (6, 0.5)):  # the nearest tets cut, one heals
+        sigma = sigma.copy()
+        sigma[nearest[:count]] = value
+        assert solver.set_conductivity(sigma)
+        _, fresh = setup(mesh)
+        fresh.set_conductivity(sigma)
+        assert solver._incidence is not None  # the update path ran
+        assert np.array_equal(solver.weights, fresh.weights)
+        assert np.array_equal(solver.matrix.data, fresh.matrix.data)
+        assert np.array_equal(solver.krylov.A.data, fresh.krylov.A.data)
+        assert np.array_equal(solver._scale, fresh._scale)
+    assert solver._updated(np.full(mesh.n_tets, 2 * SIGMA)) is None  # every tet: assembled anew
+    load = np.zeros(mesh.n_nodes)
+    load[mesh.side_nodes("z+")] = 1e-3
+    V, _ = solver.solve(load)
+    V_fresh, _ = fresh.solve(load)
+    assert np.array_equal(V, V_fresh)
+
+
 @pytest.mark.parametrize("tol", [1e-3, 1e-5])
 def test_energy_guard_accepts_a_potential_within_its_tolerance(paper_meshes, tol):
     """With an energy tolerance a changed conductivity is solved by PCG from the last potential

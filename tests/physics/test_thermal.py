@@ -172,6 +172,38 @@ def test_operator_reused_until_coefficients_change(cube):
     assert abs(kept.matrix - fresh.matrix).max() == 0.0
 
 
+@pytest.mark.parametrize("dt", [0.03, 10.0])
+def test_operator_update_equals_a_fresh_assembly_bit_for_bit(cube, rng, dt):
+    """rho c changed on a few nodes and k on a few tets (tissue drying, a vapor pocket) updates
+    the last operator where they reach instead of assembling it, exactly as assembling it does;
+    at 10 s the monotone fallback raises theta near the changes too."""
+    mesh, hm = cube
+    stepper = HeatStepper(hm, h_w_per_m2_k=25.0)
+    rc = np.full(mesh.n_nodes, RHO_C)
+    k = np.full(mesh.n_tets, K_TISSUE)
+    stepper.operator(dt, rc, k)
+    for _ in range(3):
+        rc, k = rc.copy(), k.copy()
+        rc[rng.choice(mesh.n_nodes, 20, replace=False)] *= rng.uniform(0.2, 1.5, 20)
+        k[rng.choice(mesh.n_tets, 40, replace=False)] *= rng.uniform(0.05, 2.0, 40)
+        op, assembly_s = stepper.operator(dt, rc, k)
+        assert assembly_s > 0 and stepper._incidence is not None  # the update path ran
+        fresh = assemble_heat_operator(hm, dt, rc, k, stepper.robin)
+        for name in ("mass", "w", "theta", "theta_edge", "scale", "off_diagonal", "steep_edges"):
+            assert np.array_equal(getattr(op, name), getattr(fresh, name)), name
+        assert np.array_equal(op.matrix.data, fresh.matrix.data)
+        assert np.array_equal(op.scaled.data, fresh.scaled.data)
+        assert op.dominance == fresh.dominance
+    if dt > 1:
+        assert op.fallback_nodes.size > 0
+    bad = rc.copy()
+    bad[7] = -RHO_C
+    with pytest.raises(SceneError):
+        stepper.operator(dt, bad, k)
+    kept, assembly_s = stepper.operator(dt, rc, k)
+    assert kept is op and assembly_s == 0.0  # the last operator is kept
+
+
 def test_rejects_bad_coefficients(cube):
     mesh, hm = cube
     robin = hm.robin(25.0)

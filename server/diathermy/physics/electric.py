@@ -30,6 +30,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from diathermy.errors import SceneError
+from diathermy.fem.edge_update import EdgeIncidence, edge_incidence, update_laplacian
 from diathermy.fem.edges import EdgeStiffness, LaplacianPattern, laplacian_pattern
 from diathermy.fem.energy_cg import EnergyCG, energy_cg
 from diathermy.fem.multigrid import SCALAR_AMG_OPTIONS, scaled_candidates, unit_diagonal
@@ -75,6 +76,10 @@ nodes, 40-50 ms for 2.6-3.2 k, 70-120 ms for 4 k, measured on the graded grids' 
 
 WINDOW_HOT = 1e-3
 """The window covers the nodes whose start residual is above this fraction of the largest."""
+
+UPDATE_MAX_TETS = 0.05
+"""A conductivity change updates the last matrix when at most this fraction of the tets changed
+(a cutting step changes a few dozen); above it the matrix is assembled anew."""
 
 
 class PotentialSolver:
@@ -143,8 +148,10 @@ class PotentialSolver:
         self.sigma: np.ndarray | None = None
         self.weights: np.ndarray | None = None
         self.matrix: sp.csr_matrix | None = None  # K on the free nodes, unscaled
+        self._scaled: sp.csr_matrix | None = None  # its unit-diagonal scaling
         self._scale = np.ones(self.pattern.n)  # d = diag(K)^-1/2
         self.version = 0  # counts assemblies, so cached fields can tell whether sigma changed
+        self._incidence: EdgeIncidence | None = None  # built on the first update
         self._pending_assembly_s = 0.0
 
     @property
@@ -159,15 +166,52 @@ class PotentialSolver:
         if not np.all(sigma > 0) or not np.all(np.isfinite(sigma)):
             raise SceneError("conductivity must be positive and finite in every tet")
         t0 = time.perf_counter()
+        scaled = self._updated(sigma)
+        if scaled is None:
+            self.weights = self.stiffness.weights(sigma)
+            self.matrix = self.pattern.matrix(self.stiffness, self.weights)
+            scaled, self._scale = unit_diagonal(self.matrix)
+        self._scaled = scaled
         self.sigma = sigma.copy()
         self.version += 1
-        self.weights = self.stiffness.weights(sigma)
-        self.matrix = self.pattern.matrix(self.stiffness, self.weights)
-        scaled, self._scale = unit_diagonal(self.matrix)
         self.krylov.near_nullspace = scaled_candidates(self._scale)
         self.krylov.set_operator(scaled)
         self._pending_assembly_s += time.perf_counter() - t0
         return True
+
+    def _updated(self, sigma: np.ndarray) -> sp.csr_matrix | None:
+        """The scaled matrix for ``sigma`` from the last one, its entries rewritten where the
+        tets whose sigma changed couple (``fem.edge_update``: bit for bit a fresh assembly's),
+        with ``weights``, ``matrix`` and the scale set; None when there is no last matrix or
+        more than ``UPDATE_MAX_TETS`` of the tets changed (assembled anew)."""
+        A = self._scaled
+        if self.sigma is None or self.matrix is None or self.weights is None or A is None:
+            return None
+        changed = np.flatnonzero(sigma != self.sigma)
+        if changed.size > UPDATE_MAX_TETS * self.n_tets:
+            return None
+        if self._incidence is None:
+            self._incidence = edge_incidence(self.stiffness, self.n_tets, self.pattern)
+        inc = self._incidence
+        edges = inc.edges_of_tets(changed)
+        w = self.weights.copy()
+        w[edges] = inc.weights_on(self.stiffness, sigma, edges)
+        nodes = np.unique(self.stiffness.edges[edges])
+        up = update_laplacian(
+            self.pattern,
+            inc,
+            self.matrix.data,
+            A.data,
+            self._scale,
+            w,
+            edges,
+            nodes,
+            inc.degree_on(w, nodes),
+        )
+        p = self.pattern
+        self.weights, self._scale = w, up.scale
+        self.matrix = sp.csr_matrix((up.data, p.indices, p.indptr), shape=(p.n, p.n))
+        return sp.csr_matrix((up.scaled_data, p.indices, p.indptr), shape=(p.n, p.n))
 
     def solve(
         self, load: np.ndarray, dirichlet_values: np.ndarray | None = None

@@ -18,6 +18,7 @@ from typing import Literal
 
 import numpy as np
 
+from diathermy.fem.edge_update import EdgeIncidence, edge_incidence
 from diathermy.fem.multigrid import SCALAR_AMG_OPTIONS, scaled_candidates
 from diathermy.fem.solvers import KrylovSolver, SolveStats
 from diathermy.physics.heat_operator import (
@@ -27,9 +28,15 @@ from diathermy.physics.heat_operator import (
     assemble_heat_operator,
     heat_energy,
     heat_rhs,
+    updated_heat_operator,
 )
 
 HeatPreconditioner = Literal["auto", "jacobi", "amg"]
+
+UPDATE_MAX_CHANGED = 0.05
+"""A step whose rho c and k changed on at most this fraction of the nodes or tets updates the
+last operator (bit for bit, ``updated_heat_operator``); above it, or with a new dt, the operator
+is assembled anew."""
 
 
 @dataclass(frozen=True)
@@ -106,6 +113,7 @@ class HeatStepper:
             ),
         }
         self._key: tuple[float, np.ndarray, np.ndarray] | None = None
+        self._incidence: EdgeIncidence | None = None  # built on the first update
         self._op: HeatOperator | None = None
         self._fresh: set[str] = set()
 
@@ -115,23 +123,36 @@ class HeatStepper:
         """The step's operator (rebuilt only if dt, rho_c or k changed) and the assembly time."""
         rc = np.broadcast_to(np.asarray(rho_c, dtype=float), (self.hmesh.n_nodes,))
         kk = np.broadcast_to(np.asarray(k, dtype=float), self.hmesh.geom.volumes.shape)
+        t0 = time.perf_counter()
+        previous, kept_w = None, None
         if self._op is not None and self._key is not None:
             dt0, rc0, k0 = self._key
-            same_k = _same(k0, kk)
-            if dt0 == dt_s and same_k and _same(rc0, rc):
+            changed_nodes = np.flatnonzero(rc != rc0)
+            changed_tets = np.flatnonzero(kk != k0)
+            kept_w = self._op.w if changed_tets.size == 0 else None
+            if dt0 == dt_s and changed_nodes.size == 0 and changed_tets.size == 0:
                 return self._op, 0.0
+            few = UPDATE_MAX_CHANGED * max(rc.size, kk.size)
+            if dt0 == dt_s and changed_nodes.size + changed_tets.size <= few:
+                previous = self._op
+        if previous is not None:
+            if self._incidence is None:
+                hm = self.hmesh
+                self._incidence = edge_incidence(hm.stiffness, kk.size, hm.pattern)
+            self._op = updated_heat_operator(
+                self.hmesh,
+                self._incidence,
+                previous,
+                rc,
+                kk,
+                changed_nodes,
+                changed_tets,
+                monotone=self.monotone,
+            )
         else:
-            same_k = False
-        t0 = time.perf_counter()
-        self._op = assemble_heat_operator(
-            self.hmesh,
-            dt_s,
-            rc,
-            kk,
-            self.robin,
-            monotone=self.monotone,
-            k_weights=self._op.w if same_k and self._op is not None else None,
-        )
+            self._op = assemble_heat_operator(
+                self.hmesh, dt_s, rc, kk, self.robin, monotone=self.monotone, k_weights=kept_w
+            )
         self._key = (float(dt_s), rc.copy(), kk.copy())
         self._fresh = set(self._solvers)
         return self._op, time.perf_counter() - t0
@@ -203,7 +224,3 @@ class HeatStepper:
             fallback_nodes=op.fallback_nodes,
             theta_max=float(op.theta.max()),
         )
-
-
-def _same(a: np.ndarray, b: np.ndarray) -> bool:
-    return a.shape == b.shape and bool(np.array_equal(a, b))
