@@ -42,7 +42,9 @@ def assert_sane(sim: Simulation, rep: StepReport) -> None:
       plus what the heat solves' tolerance allows: each leaves a residual <= rtol |M T / dt|, so
       the stored energy may be off by ~rtol sum(m T) per step (dominant only at dt ~ 1e-4 s);
     - every solve that ran reached its tolerance (electric and mechanics residuals <= rtol; an
-      incremental mechanics step that stayed local: its relative residual <= the guard).
+      incremental mechanics step that stayed local: its relative residual <= the guard, or its
+      energy-error estimate <= the energy tolerance; the interval's global PCG: its estimate <=
+      the interval tolerance).
     """
     st, t = sim.state, sim.tissue
     for name, arr in st.arrays.items():
@@ -71,7 +73,8 @@ def assert_sane(sim: Simulation, rep: StepReport) -> None:
             assert el.extra["residual"] <= sim.scene.solver.electric_rtol * 1.01, rep.step
     mech = rep.effects.get("mechanics")
     if mech is not None and mech.ran:  # the incremental path: its guard; a full solve: rtol
-        if "energy_estimate" in mech.extra and mech.extra["mode"] == "local":  # polished
+        polished = mech.extra["mode"] == "local" or "whole block" in mech.extra.get("why", "")
+        if "energy_estimate" in mech.extra and polished:  # polished, or the interval's PCG
             assert mech.extra["energy_estimate"] <= mech.extra["energy_tolerance"], rep.step
         else:
             tol = mech.extra["guard_tolerance"] if mech.extra["mode"] == "local" else None

@@ -117,6 +117,38 @@ def test_full_interval(every):
         assert run_length < every
 
 
+@pytest.mark.parametrize("interval_tolerance", [3e-4, 0.0])
+def test_the_interval_solve_reaches_its_tolerance_on_the_whole_block(interval_tolerance):
+    """Every full_every-th solve is global: PCG with the kept hierarchy from the local answer to
+    the interval tolerance (the estimate and the iterations in the report), or with 0 the FEM
+    solve to rtol; the full-every-step run agrees within the issue's tolerances either way."""
+    from diathermy.scene import Resolution
+
+    graded = {"resolution": Resolution(fine_m=1.5e-3, margin_m=1e-3, depth_m=3e-3)}
+    mech = {"full_every": 3, "interval_tolerance": interval_tolerance}
+    fast = Simulation(tiny_scene(mechanics=mech, **graded))
+    full = Simulation(tiny_scene(solver=SolverConfig(incremental=False), **graded))
+    intervals = []
+    for _ in range(STEPS):
+        r, _ = fast.step(), full.step()
+        mech_report = r.effects["mechanics"]
+        if mech_report.ran and mech_report.extra["why"].startswith("interval"):
+            intervals.append(mech_report.extra)
+        W, W_ref = fast.state["strain_energy"], full.state["strain_energy"]
+        if W_ref.any():
+            assert relative_strain_energy_error(W, W_ref) <= 0.01, r.step
+    assert len(intervals) >= 3
+    for extra in intervals[1:]:  # the first may come before a hierarchy is kept
+        assert extra["mode"] == "full"
+        if interval_tolerance > 0:
+            assert "whole block" in extra["why"], extra["why"]
+            assert extra["energy_estimate"] <= interval_tolerance
+            assert extra["energy_tolerance"] == interval_tolerance
+        else:
+            assert "whole block" not in extra["why"] and "solve_s" in extra
+    assert fast.state["removed"].any()
+
+
 @pytest.mark.parametrize("grid", ["uniform", "graded"])
 def test_rescaled_strain_energy_is_the_recomputed_one(grid):
     """On a local step W is alpha^2 x the last W away from the patch, the polish window and the

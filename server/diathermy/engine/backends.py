@@ -114,6 +114,7 @@ def make_backend(
             energy_tolerance=cfg.energy_tolerance,
             polish_iterations=cfg.polish_iterations,
             window_m=cfg.polish_window_m,
+            interval_tolerance=cfg.interval_tolerance,
         )
         if cfg.predictor != "auto":
             return IncrementalFEMBackend(fem, settings)

@@ -32,6 +32,7 @@ import scipy.sparse as sp
 
 from diathermy.fem.energy_cg import EnergyCG, energy_cg
 from diathermy.physics.local_solve import (
+    INTERVAL_MAX_ITERATIONS,
     IncrementalSettings,
     LocalSolve,
     local_solve,
@@ -154,13 +155,18 @@ class IncrementalFEMBackend:
         f: np.ndarray,
         u: np.ndarray,
         residual: np.ndarray | None = None,
+        *,
+        interval: bool = False,
     ) -> EnergyCG | None:
         """PCG from u (n_nodes, 3) m with the kept hierarchy until the energy-error estimate
-        passes, on the Jacobi-scaled system (``residual``: its b - A x when known); None when
-        there is no hierarchy to keep (the full solve builds one) or polishing is off."""
+        passes ``energy_tolerance`` (``interval``: ``interval_tolerance``, within
+        ``INTERVAL_MAX_ITERATIONS``), on the Jacobi-scaled system (``residual``: its b - A x
+        when known); None when there is no hierarchy to keep (the full solve builds one) or
+        polishing is off."""
         M = solver.krylov.kept_preconditioner
         A = solver.krylov.A
-        if M is None or A is None or self.settings.polish_iterations == 0:
+        st = self.settings
+        if M is None or A is None or st.polish_iterations == 0:
             return None
         s = solver.scale
         return energy_cg(
@@ -168,8 +174,8 @@ class IncrementalFEMBackend:
             f.ravel() * s,
             u.ravel() / s,
             M,
-            tol=self.settings.energy_tolerance,
-            maxiter=self.settings.polish_iterations,
+            tol=st.interval_tolerance if interval else st.energy_tolerance,
+            maxiter=INTERVAL_MAX_ITERATIONS if interval else st.polish_iterations,
             residual=residual,
         )
 
@@ -183,15 +189,21 @@ class IncrementalFEMBackend:
         moved: np.ndarray | None,
         extra: dict[str, float | int | bool | str],
         iterations: int = 0,
+        interval: bool = False,
     ) -> MechanicsOutput:
         """The predictor's answer u (n_nodes, 3) m taken as this step's; ``moved``: u is the
         Ritz-scaled warm start but on these nodes (the patch, the window), so its strain energy
-        is updated there, not recomputed; None: u moved everywhere."""
-        self.since_full += 1
-        self.n_local += 1
+        is updated there, not recomputed; None: u moved everywhere. ``interval``: the answer is
+        the interval's global solve (``interval_tolerance``), which restarts the count."""
+        if interval:
+            self.since_full = 0
+            self.n_full += 1
+        else:
+            self.since_full += 1
+            self.n_local += 1
         loose = solver.fragments.loose
         previous_E, self.last_E_pa = self.last_E_pa, solver.youngs_modulus_pa
-        extra.update(mode="local")
+        extra.update(mode="full" if interval else "local")
         return MechanicsOutput(
             u=u,
             iterations=iterations,
@@ -217,6 +229,12 @@ class IncrementalFEMBackend:
         solver, rebuilt = self.fem.operator_for(youngs_modulus_pa, healthy)
         operator_s = time.perf_counter() - t0
         why = self.full_reason(warm_start)
+        # the interval's global solve: from the local path's answer to interval_tolerance
+        interval = why if why is not None and why.startswith("interval") else None
+        if interval is not None and self.settings.interval_tolerance > 0:
+            why = None
+        else:
+            interval = None
         extra: dict[str, float | int | bool | str] = {"operator_s": operator_s, "predictor": "none"}
         x0 = warm_start
         if why is None:
@@ -239,20 +257,46 @@ class IncrementalFEMBackend:
                 local_s=time.perf_counter() - t0 - operator_s,
             )
             tol = self.settings.guard_tolerance
-            if self.settings.guard == "residual" and local.residual <= tol:
+            if self.settings.guard == "residual" and local.residual <= tol and not interval:
                 extra.update(why=f"residual {local.residual:.1e} <= {tol:.0e}", guard_tolerance=tol)
                 moved = local.patch_nodes if persistence else None
                 return self._accept(solver, local.u, local.residual, rebuilt, local, moved, extra)
             why = (
-                f"residual {local.residual:.1e} > {tol:.0e} after the patch"
+                interval
+                if interval is not None
+                else f"residual {local.residual:.1e} > {tol:.0e} after the patch"
                 if self.settings.guard == "residual"
                 else "energy guard"
             )
             u_window, r_window, window_nodes = self.windowed.correct(
                 solver, f, local.u, local.Ku, local.patch_nodes, extra
             )
-            polished = self._polish(solver, f, u_window, r_window)
-            if polished is not None:
+            polished = self._polish(solver, f, u_window, r_window, interval=bool(interval))
+            if polished is not None and interval is not None:
+                itol = self.settings.interval_tolerance
+                extra.update(
+                    polish_iterations=polished.iterations,
+                    energy_estimate=polished.estimate,
+                    energy_tolerance=itol,
+                    local_s=time.perf_counter() - t0 - operator_s,
+                )
+                if polished.estimate <= itol:
+                    extra.update(
+                        why=f"{interval}: {polished.iterations} CG iterations on the whole block "
+                        f"with the kept hierarchy: energy-error estimate {polished.estimate:.1e} "
+                        f"<= {itol:.0e}"
+                    )
+                    u = (polished.x * solver.scale).reshape(-1, 3)
+                    return self._accept(
+                        solver, u, polished.residual, rebuilt, local, None, extra,
+                        iterations=polished.iterations, interval=True,
+                    )  # fmt: skip
+                why = (
+                    f"{interval}: energy-error estimate {polished.estimate:.1e} > {itol:.0e} "
+                    f"after {polished.iterations} CG iterations"
+                )
+                polished = None  # the FEM solve follows, from the last displacement
+            elif polished is not None:
                 etol = self.settings.energy_tolerance
                 extra.update(
                     polish_iterations=polished.iterations,

@@ -34,6 +34,14 @@ DEFAULT_WINDOW_M = 0.016
 """Margin of the windowed polish around the patch (``polish_window``): on the default graded
 grid's cutting steps 97-99 % of the patched prediction's error energy lies within 16 mm of it
 (docs/realtime.md)."""
+DEFAULT_INTERVAL_TOLERANCE = 3e-4
+"""Relative energy-norm error estimate the interval's global solve reaches (every ``full_every``
+solves, from the local path's answer, with the kept hierarchy): a tenth of the step's
+``energy_tolerance``, so the far-field error that builds up between intervals is reset, for a
+fraction of the FEM tolerance's iterations (docs/realtime.md). 0: the FEM solve to its residual
+tolerance."""
+INTERVAL_MAX_ITERATIONS = 150
+"""PCG iterations the interval's global solve may take before the FEM solve takes over."""
 WINDOW_MAX_FRACTION = 0.25
 """The window holds at most this share of the nodes (its margin is halved until it does)."""
 Guard = Literal["residual", "energy"]
@@ -57,6 +65,7 @@ class IncrementalSettings:
     window_m: float = DEFAULT_WINDOW_M  # the windowed polish's margin; 0: none
     window_iterations: int = 30
     window_share: float = 0.3  # the window's tolerance: this x energy_tolerance
+    interval_tolerance: float = DEFAULT_INTERVAL_TOLERANCE  # 0: the interval solves FEM-tight
 
     def __post_init__(self) -> None:
         if not self.guard_tolerance > 0 or self.full_every < 1 or self.patch_rounds < 1:
@@ -67,6 +76,8 @@ class IncrementalSettings:
             raise ValueError(
                 "window_m must be >= 0, window_iterations >= 1, window_share in (0, 1]"
             )
+        if not 0 <= self.interval_tolerance < 1:
+            raise ValueError("interval_tolerance must lie in [0, 1)")
         if self.guard not in ("residual", "energy"):
             raise ValueError(f"guard must be 'residual' or 'energy', got {self.guard!r}")
 

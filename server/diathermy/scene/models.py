@@ -170,6 +170,14 @@ class MechanicsConfig(_Model):
     full_every: Annotated[int, Field(ge=1, le=10000)] = Field(
         10, description="fem predictor 'previous': a full solve at least every this many solves"
     )
+    interval_tolerance: Annotated[float, Field(ge=0, lt=1)] = Field(
+        3e-4,
+        description="fem, incremental: the interval's full solve (every full_every solves) is "
+        "PCG on the whole block with the kept AMG hierarchy, from the step's local answer, "
+        "until the estimated relative energy-norm error is at most this (a tenth of "
+        "energy_tolerance by default: the far-field error built up since the last one is "
+        "reset); 0: CG to the FEM tolerance (rtol), as in the full mode",
+    )
     guard_tolerance: Annotated[float, Field(gt=0)] | None = Field(
         None,
         description="cnn: relative equilibrium residual above which the prediction is corrected "
