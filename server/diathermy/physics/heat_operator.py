@@ -171,17 +171,33 @@ def assemble_heat_operator(
     A = hmesh.pattern.matrix(stiff, wt, mass / dt_s + theta * robin)
     off = stiff.degree(np.abs(wt))
     scaled, scale = unit_diagonal(A)
+    return _heat_operator(float(dt_s), mass, robin, w, theta, theta_edge, A, scaled, scale, off)
+
+
+def _heat_operator(
+    dt_s: float,
+    mass: np.ndarray,
+    robin: np.ndarray,
+    w: np.ndarray,
+    theta: np.ndarray,
+    theta_edge: np.ndarray,
+    matrix: sp.csr_matrix,
+    scaled: sp.csr_matrix,
+    scale: np.ndarray,
+    off: np.ndarray,
+) -> HeatOperator:
+    """The operator of these parts, with its diagonal dominance and steep edges."""
     return HeatOperator(
-        dt_s=float(dt_s),
+        dt_s=dt_s,
         mass=mass,
         robin=robin,
         w=w,
         theta=theta,
         theta_edge=theta_edge,
-        matrix=A,
+        matrix=matrix,
         scaled=scaled,
         scale=scale,
-        dominance=float(np.max(off / A.diagonal())),
+        dominance=float(np.max(off / matrix.diagonal())),
         steep_edges=np.flatnonzero(theta_edge > 0.5),
         off_diagonal=off,
     )
@@ -244,20 +260,8 @@ def updated_heat_operator(
     A = sp.csr_matrix((up.data, p.indices, p.indptr), shape=(p.n, p.n))
     off = previous.off_diagonal.copy()
     off[around] = inc.degree_on(np.abs(wt), around)
-    return HeatOperator(
-        dt_s=dt_s,
-        mass=mass,
-        robin=robin,
-        w=w,
-        theta=theta,
-        theta_edge=theta_edge,
-        matrix=A,
-        scaled=sp.csr_matrix((up.scaled_data, p.indices, p.indptr), shape=(p.n, p.n)),
-        scale=up.scale,
-        dominance=float(np.max(off / A.diagonal())),
-        steep_edges=np.flatnonzero(theta_edge > 0.5),
-        off_diagonal=off,
-    )
+    scaled = sp.csr_matrix((up.scaled_data, p.indices, p.indptr), shape=(p.n, p.n))
+    return _heat_operator(dt_s, mass, robin, w, theta, theta_edge, A, scaled, up.scale, off)
 
 
 def heat_rhs(

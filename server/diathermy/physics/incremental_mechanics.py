@@ -272,38 +272,26 @@ class IncrementalFEMBackend:
                 solver, f, local.u, local.Ku, local.patch_nodes, extra
             )
             polished = self._polish(solver, f, u_window, r_window, interval=bool(interval))
-            if polished is not None and interval is not None:
-                itol = self.settings.interval_tolerance
-                extra.update(
-                    polish_iterations=polished.iterations,
-                    energy_estimate=polished.estimate,
-                    energy_tolerance=itol,
-                    local_s=time.perf_counter() - t0 - operator_s,
-                )
-                if polished.estimate <= itol:
-                    extra.update(
-                        why=f"{interval}: {polished.iterations} CG iterations on the whole block "
-                        f"with the kept hierarchy: energy-error estimate {polished.estimate:.1e} "
-                        f"<= {itol:.0e}"
-                    )
-                    u = (polished.x * solver.scale).reshape(-1, 3)
-                    return self._accept(
-                        solver, u, polished.residual, rebuilt, local, None, extra,
-                        iterations=polished.iterations, interval=True,
-                    )  # fmt: skip
-                why = (
-                    f"{interval}: energy-error estimate {polished.estimate:.1e} > {itol:.0e} "
-                    f"after {polished.iterations} CG iterations"
-                )
-                polished = None  # the FEM solve follows, from the last displacement
-            elif polished is not None:
-                etol = self.settings.energy_tolerance
+            if polished is not None:
+                st = self.settings
+                etol = st.interval_tolerance if interval is not None else st.energy_tolerance
                 extra.update(
                     polish_iterations=polished.iterations,
                     energy_estimate=polished.estimate,
                     energy_tolerance=etol,
                     local_s=time.perf_counter() - t0 - operator_s,
                 )
+                if polished.estimate <= etol and interval is not None:
+                    extra.update(
+                        why=f"{interval}: {polished.iterations} CG iterations on the whole block "
+                        f"with the kept hierarchy: energy-error estimate {polished.estimate:.1e} "
+                        f"<= {etol:.0e}"
+                    )
+                    u = (polished.x * solver.scale).reshape(-1, 3)
+                    return self._accept(
+                        solver, u, polished.residual, rebuilt, local, None, extra,
+                        iterations=polished.iterations, interval=True,
+                    )  # fmt: skip
                 if polished.estimate <= etol:
                     extra.update(
                         why=f"{why}; {polished.iterations} CG iterations with the kept "
@@ -324,7 +312,8 @@ class IncrementalFEMBackend:
                     f"{why}; energy-error estimate {polished.estimate:.1e} > {etol:.0e} after "
                     f"{polished.iterations} CG iterations"
                 )
-                x0 = (polished.x * solver.scale).reshape(-1, 3)
+                if interval is None:  # the interval's FEM solve starts from the last answer
+                    x0 = (polished.x * solver.scale).reshape(-1, 3)
             else:
                 x0 = local.u
         out = self.fem.solve(
