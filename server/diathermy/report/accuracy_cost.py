@@ -110,6 +110,7 @@ def _row(
             correction=rec.variant.correction,
             incremental=rec.variant.incremental,
             full_every=rec.variant.full_every,
+            interval_tolerance=rec.variant.interval_tolerance,
         ), np.array([])
     step = np.asarray(rec.step_s)
     mech = np.asarray(rec.effect_s.get("mechanics", [0.0]))
@@ -153,6 +154,7 @@ def _row(
         compared_steps=int(active.sum()),
         incremental=rec.variant.incremental,
         full_every=rec.variant.full_every,
+        interval_tolerance=rec.variant.interval_tolerance,
         dt_s=dt,
         guard=rec.variant.guard,
     ), se

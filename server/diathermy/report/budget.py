@@ -90,6 +90,8 @@ def resolve_accuracy_budget(scene: Scene, report_path: str | Path | None = None)
     )  # fmt: skip
     if row["backend"] == "fem":  # rows measured before issue #25 solved in full
         data["mechanics"]["full_every"] = row.get("full_every", 10)
+        # rows measured before the interval's tolerance existed solved it to the FEM rtol
+        data["mechanics"]["interval_tolerance"] = row.get("interval_tolerance", 0.0)
         data["mechanics"]["guard"] = row.get("guard", "auto")
         data["solver"]["incremental"] = bool(row.get("incremental", False))
         if row["variant"] != "previous":  # persistence patched but alone: rows before #22 said

@@ -43,6 +43,7 @@ class Row:
     compared_steps: int = 0  # steps where the reference had strain energy to compare against
     incremental: bool = False  # fem: the previous-displacement predictor (issue #25)
     full_every: int = 10
+    interval_tolerance: float = 0.0  # rows measured before it existed: the FEM-tight interval
     dt_s: float | None = None  # the variant's time step (None: the scene's; before issue #25)
     guard: str = "auto"
 

@@ -28,6 +28,7 @@ class Variant:
     correction: Literal["none", "patch"] = "none"  # cnn and fem-incremental: u as is, or patched
     incremental: bool = False  # fem: the previous-displacement predictor (issue #25)
     full_every: int = 10  # ... with a full solve at least every this many solves
+    interval_tolerance: float = 3e-4  # ... that solve's energy-error estimate (0: FEM rtol)
     guard: Literal["auto", "residual", "energy"] = "auto"  # fem-incremental: what accepts
     dt_s: float | None = None  # the time step; None: the scene's
 
@@ -58,6 +59,7 @@ class Variant:
             "guard_tolerance": self.guard_tolerance,
             "correction": self.correction,
             "full_every": self.full_every,
+            "interval_tolerance": self.interval_tolerance,
             "guard": self.guard,
         }
         return scene_from_dict(data)
@@ -126,6 +128,10 @@ def default_variants(models: dict[str, str] | None = None) -> list[Variant]:
         Variant(
             "fem-incremental-full50", rtol=1e-6, incremental=True, full_every=50,
             correction="patch",
+        ),
+        Variant(
+            "fem-incremental-interval-fem", rtol=1e-6, incremental=True, correction="patch",
+            interval_tolerance=0.0,
         ),
         Variant(
             "fem-incremental-energy", rtol=1e-6, incremental=True, correction="patch",
