@@ -15,10 +15,12 @@ corrected by the patch solve where its residual concentrates (the crater wall,
   none when the window's answer passes) until the estimated relative energy-norm error
   sqrt(r.Mr) / ||u||_K is at most ``energy_tolerance``.
 
-What passes neither, and at least every ``full_every`` solves, CG solves in full from it to the
-FEM tolerance. On fine graded grids a small residual does not bound the error (the residual
-guard let 57 % strain-energy errors through, docs/realtime.md), so 'auto' picks the energy
-guard there. Each answer says which path it took and why (``extra["mode"]``: 'local' for an
+What passes neither CG solves in full from it to the FEM tolerance. Every ``full_every`` solves
+the interval's global solve resets the error that builds up outside the window: PCG with the kept
+hierarchy on the whole block, from the local answer, to ``interval_tolerance`` (a tenth of the
+step's by default; 0, or a PCG that does not get there: the FEM solve). On fine graded grids a
+small residual does not bound the error (the residual guard let 57 % strain-energy errors
+through, docs/realtime.md), so 'auto' picks the energy guard there. Each answer says which path it took and why (``extra["mode"]``: 'local' for an
 accepted prediction, 'full'; ``["why"]``) and which predictor started it (``["predictor"]``,
 ``["predictor_why"]``).
 """
