@@ -20,9 +20,9 @@ the interval's global solve resets the error that builds up outside the window: 
 hierarchy on the whole block, from the local answer, to ``interval_tolerance`` (a tenth of the
 step's by default; 0, or a PCG that does not get there: the FEM solve). On fine graded grids a
 small residual does not bound the error (the residual guard let 57 % strain-energy errors
-through, docs/realtime.md), so 'auto' picks the energy guard there. Each answer says which path it took and why (``extra["mode"]``: 'local' for an
-accepted prediction, 'full'; ``["why"]``) and which predictor started it (``["predictor"]``,
-``["predictor_why"]``).
+through, docs/realtime.md), so 'auto' picks the energy guard there. Each answer says which path
+it took and why (``extra["mode"]``: 'local' for an accepted prediction, 'full'; ``["why"]``) and
+which predictor started it (``["predictor"]``, ``["predictor_why"]``).
 """
 
 from __future__ import annotations
