@@ -28,8 +28,8 @@ from diathermy.physics.heat_operator import (
     assemble_heat_operator,
     heat_energy,
     heat_rhs,
-    updated_heat_operator,
 )
+from diathermy.physics.heat_operator_update import updated_heat_operator
 
 HeatPreconditioner = Literal["auto", "jacobi", "amg"]
 
