@@ -75,11 +75,12 @@ def scene_for(
     dt_s: float = DT_S,
     length_mm: float | None = None,
     contact: str | None = None,
+    surface_mm: float | None = None,
 ) -> Scene:
     """The fixed electrode (current-density drive) with its resolution at ``fine_mm`` (0: uniform
     33x33x65), or the moving electrode as shipped (``fine_mm`` None: its own grid); the cut
-    driver's non-local length at ``length_mm`` and the electrode's contact model at ``contact``
-    (None: the scene's)."""
+    driver's non-local length at ``length_mm``, the electrode's contact model at ``contact`` and
+    the cell height at the top surface at ``surface_mm`` (None: the scene's; 0: fine_mm)."""
     scene = builtin_scene("moving-electrode" if moving else "fixed-electrode")
     if fine_mm is not None and fine_mm <= 0:
         scene = scene.on_uniform_grid(UNIFORM)
@@ -93,6 +94,9 @@ def scene_for(
         base["level_set"] = {**base["level_set"], "nonlocal_length_m": length_mm * 1e-3}
     if contact is not None:
         base["electrodes"] = [{**e, "contact": contact} for e in base["electrodes"]]
+    if surface_mm is not None and base.get("resolution") is not None:
+        surface = surface_mm * 1e-3 if surface_mm > 0 else None
+        base["resolution"] = {**base["resolution"], "surface_m": surface}
     return Scene.model_validate(base)
 
 
@@ -102,14 +106,16 @@ def tag_of(
     dt_s: float = DT_S,
     length_mm: float = 0.0,
     contact: str = "flat",
+    surface_mm: float = 0.0,
 ) -> str:
     """The run's file tag: scene, grid, dt if not the default, the non-local length if any, the
-    contact model if not flat."""
+    contact model if not flat, the surface cell if refined."""
     kind = "moving" if moving else "fixed"
     grid = "default" if fine_mm is None else "uniform" if fine_mm <= 0 else f"{fine_mm:g}mm"
     tag = f"{kind}_{grid}" + ("" if dt_s == DT_S else f"_dt{dt_s:g}")
     tag += f"_l{length_mm:g}" if length_mm > 0 else ""
-    return tag + ("" if contact == "flat" else f"_{contact}")
+    tag += "" if contact == "flat" else f"_{contact}"
+    return tag + (f"_s{surface_mm:g}" if surface_mm > 0 else "")
 
 
 def front_strain_energy(sim: Simulation) -> float:
@@ -147,10 +153,16 @@ def run(
     dt_s: float = DT_S,
     length_mm: float | None = None,
     contact: str | None = None,
+    surface_mm: float | None = None,
 ) -> Path:
-    scene = scene_for(fine_mm, moving=moving, dt_s=dt_s, length_mm=length_mm, contact=contact)
+    scene = scene_for(
+        fine_mm, moving=moving, dt_s=dt_s, length_mm=length_mm, contact=contact,
+        surface_mm=surface_mm,
+    )  # fmt: skip
     length_mm = scene.level_set.nonlocal_length_m * 1e3
     contact = scene.electrodes[0].contact
+    res = scene.resolution
+    surface_mm = res.surface_m * 1e3 if res is not None and res.surface_m is not None else 0.0
     t0 = time.perf_counter()
     sim = Simulation(scene)
     build_s = time.perf_counter() - t0
@@ -195,8 +207,8 @@ def run(
             break
     if not moving:
         profiles["profile_end"] = crater_profile(sim, centre)
-    out = RESULTS / f"convergence_{tag_of(fine_mm, moving, dt_s, length_mm, contact)}.npz"
-    res = scene.resolution
+    tag = tag_of(fine_mm, moving, dt_s, length_mm, contact, surface_mm)
+    out = RESULTS / f"convergence_{tag}.npz"
     np.savez(
         out,
         **{k: np.asarray(v) for k, v in rec.items()},
@@ -213,6 +225,7 @@ def run(
         target_s=seconds,
         length_mm=length_mm,
         contact=contact,
+        surface_mm=surface_mm,
     )
     print(f"{out.name}: {len(rec['time_s'])} steps to t = {rec['time_s'][-1]:.2f} s")
     return out
@@ -849,6 +862,12 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument(
         "--contact", choices=("flat", "draped"), help="contact model (default: the scene's)"
     )
+    r.add_argument(
+        "--surface-mm",
+        type=float,
+        help="cell height at the top surface over the working region (default: the scene's; "
+        "0: the fine spacing up to the surface)",
+    )
     pw = sub.add_parser("power")
     pw.add_argument("--fine-mm", type=float, nargs="+", required=True)
     mj = sub.add_parser("main-job")
@@ -870,6 +889,7 @@ def main(argv: list[str] | None = None) -> int:
             dt_s=a.dt,
             length_mm=a.length_mm,
             contact=a.contact,
+            surface_mm=a.surface_mm,
         )
     elif a.cmd == "power":
         power(a.fine_mm)

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from diathermy.errors import MeshError
 from diathermy.fem.geometry import element_geometry
 from diathermy.mesh import Grid, build_tet_mesh
-from diathermy.mesh.grading import MAX_AXIS_NODES, graded_axis
+from diathermy.mesh.grading import MAX_AXIS_NODES, graded_axis, refined_end
 
 
 def small_graded() -> Grid:
@@ -73,6 +73,37 @@ def test_region_point_and_whole_block():
     assert np.allclose(whole, np.linspace(0.0, 0.1, 11))
 
 
+def test_the_top_of_the_region_shrinks_to_its_end_cell():
+    """Cells of at most fine over the region, shrinking by the growth ratio to the end cell at
+    its high side (the top surface); below the region they grow as before."""
+    x = graded_axis(0.0, 0.1, (0.088, 0.1), 4e-4, 1.25, max_cell=6.25e-3, hi_cell=1e-4)
+    d = np.diff(x)
+    assert x[-1] == 0.1 and d[-1] == pytest.approx(1e-4)
+    inside = x[:-1] >= 0.088 - 1e-12
+    ratio = d[inside][1:] / d[inside][:-1]
+    assert np.all(ratio <= 1 + 1e-9) and np.all(ratio >= 1 / 1.25 - 1e-9)
+    assert d[inside].max() <= 4e-4 + 1e-12
+    top = np.flatnonzero(d < d[inside].max() * (1 - 1e-6))
+    assert top.size == 7 and np.all(top >= d.size - 8)  # 1e-4 * 1.25^k for k < 7, at the top
+    same = graded_axis(0.0, 0.1, (0.088, 0.1), 4e-4, 1.25, max_cell=6.25e-3)
+    below = x <= 0.088 + 1e-12
+    assert np.array_equal(x[below], same[same <= 0.088 + 1e-12])  # unchanged below the region
+    plain = graded_axis(0.0, 0.1, (0.05, 0.1), 0.01, 1.3)
+    assert np.array_equal(graded_axis(0.0, 0.1, (0.05, 0.1), 0.01, 1.3, hi_cell=0.01), plain)
+
+
+@pytest.mark.parametrize("length", [5e-5, 1.5e-4, 5e-4, 1.2e-3, 7.3e-3])
+def test_refined_end_fills_any_length(length):
+    """Any region length: cells that add up to it, at most fine, shrinking toward the end by at
+    most the growth ratio, the end cell no longer than the fine one."""
+    d = refined_end(length, 4e-4, 1e-4, 1.25)
+    assert d.sum() == pytest.approx(length, rel=1e-12) and np.all(d > 0)
+    assert d.max() <= 4e-4 * (1 + 1e-9) and d[-1] <= max(1e-4, length) * (1 + 1e-9)
+    if d.size > 1:
+        ratio = d[:-1] / d[1:]
+        assert np.all(ratio <= 1.25 * (1 + 1e-9)) and np.all(ratio >= 1 - 1e-9)
+
+
 def test_max_cell_caps_the_far_field():
     x = graded_axis(0.0, 0.2, (0.0, 0.01), 1e-3, 1.5, max_cell=5e-3)
     assert np.diff(x).max() <= 5e-3 * (1 + 1e-9)
@@ -89,6 +120,8 @@ def test_max_cell_caps_the_far_field():
         ({"region_lo_m": (0.5, 0.0, 0.0), "region_hi_m": (0.6, 0.1, 0.1)}, "outside"),
         ({"region_lo_m": (0.1, 0.0, 0.0), "region_hi_m": (0.05, 0.1, 0.1)}, "lo <= hi"),
         ({"max_cell_m": 1e-4}, "largest cell"),
+        ({"top_cell_m": 2e-3}, "end cell .* must not exceed"),
+        ({"top_cell_m": -1e-4}, "end cell"),
         ({"region_lo_m": (0.0, 0.0)}, "region_lo_m"),
         ({"size_m": (0.2, -0.1, 0.1)}, "block size"),
         ({"origin_m": (0.0, math.inf, 0.0)}, "origin"),
@@ -129,13 +162,16 @@ def test_axes_must_match_shape_and_box():
     width=st.floats(0.0, 1.0),
     fine=st.floats(1e-4, 2.0),
     growth=st.floats(1.0, 2.0),
+    end=st.one_of(st.none(), st.floats(1e-3, 1.0)),
 )
-def test_graded_axis_properties_or_clear_error(lo, length, a, width, fine, growth):
-    """Any input gives a valid increasing axis from lo to hi, or a MeshError; never garbage."""
+def test_graded_axis_properties_or_clear_error(lo, length, a, width, fine, growth, end):
+    """Any input, with or without a refined high end, gives a valid increasing axis from lo to
+    hi, or a MeshError; never garbage."""
     hi = lo + length
     region = (lo + a * length, lo + (a + width) * length)
+    hi_cell = None if end is None else end * fine * length
     try:
-        x = graded_axis(lo, hi, region, fine * length, growth)
+        x = graded_axis(lo, hi, region, fine * length, growth, hi_cell=hi_cell)
     except MeshError:
         return
     d = np.diff(x)

@@ -64,6 +64,22 @@ def test_builtin_scenes_are_graded_under_their_electrodes(name, fine_m, depth_m)
     assert uniform.model_copy(update={"grid": scene.grid, "resolution": scene.resolution}) == scene
 
 
+def test_surface_cells_shrink_to_surface_m_at_the_top_only():
+    """``surface_m`` refines the z axis toward the top face over the working region; x and y
+    and the rest of z are the plain grid's."""
+    plain = with_resolution("fixed-electrode")
+    refined = with_resolution("fixed-electrode", surface_m=1e-4)
+    gp, gr = plain.node_grid(), refined.node_grid()
+    assert all(np.array_equal(a, b) for a, b in zip(gr.axes()[:2], gp.axes()[:2], strict=True))
+    zp, zr = gp.axes()[2], gr.axes()[2]
+    assert np.array_equal(zr[zr <= 0.1 - 12e-3], zp[zp <= 0.1 - 12e-3])
+    dz = np.diff(zr)
+    assert dz[-1] == pytest.approx(1e-4) and np.all(dz[-1:-8:-1] < 4e-4)
+    assert np.all(dz[1:] / dz[:-1] <= 1.25 + 1e-9)
+    assert gr.nz == gp.nz + 4  # seven graded cells replace three fine ones
+    assert Scene.model_validate_json(refined.model_dump_json()) == refined
+
+
 def test_default_region_covers_the_contact_or_the_path():
     fixed = with_resolution("fixed-electrode")
     lo, hi = working_region(fixed.resolution, fixed.block_m, fixed.electrodes)
@@ -97,6 +113,7 @@ BAD = {
     "max_cell_m": st.one_of(st.floats(max_value=0.0), st.floats(min_value=0.0501)),
     "margin_m": st.one_of(st.floats(max_value=-1e-9), st.floats(min_value=0.1001)),
     "depth_m": st.one_of(st.floats(max_value=0.0), st.floats(min_value=1.001)),
+    "surface_m": st.one_of(st.floats(max_value=1.9e-5), st.floats(min_value=0.0501)),
 }
 
 
@@ -111,6 +128,8 @@ def test_bad_values_name_the_field(bad):
 def test_inconsistent_or_huge_requests_are_refused():
     with pytest.raises(ValidationError, match="max_cell_m .* must be at least fine_m"):
         Resolution(fine_m=2e-3, max_cell_m=1e-3)
+    with pytest.raises(ValidationError, match="surface_m .* must not exceed fine_m"):
+        Resolution(fine_m=4e-4, surface_m=5e-4)
     with pytest.raises(ValidationError, match="region_m: high corner"):
         Resolution(region_m=((0.1, 0.05, 0.1), (0.09, 0.06, 0.1)))
     with pytest.raises(ValidationError, match="resolution: the graded grid would have"):

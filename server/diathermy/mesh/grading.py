@@ -63,6 +63,33 @@ def _outer_cells(gap: float, first: float, growth: float, max_cell: float) -> np
     return out * (gap / out.sum())
 
 
+def refined_end(length: float, fine: float, end: float, growth: float) -> np.ndarray:
+    """Cell lengths (m,) filling ``length``, shrinking toward the high end by one ratio of at
+    most ``growth`` to ``end`` there, at most ``fine`` elsewhere (equal cells when ``end`` is
+    ``fine``). The sequence end, end growth, ... is followed by equal cells of at most ``fine``
+    that take the rest; where that would break the growth ratio, the sequence (then ``fine``)
+    is cut where it covers the length and scaled down to it, so no cell exceeds ``fine`` and the
+    end cell not ``end``."""
+    if end >= fine * (1.0 - 1e-12):
+        n = max(1, math.ceil(length / fine * (1.0 - 1e-12)))
+        return np.full(n, length / n)
+    if growth <= 1.0:  # no grading allowed: end-sized cells throughout
+        n = max(1, math.ceil(length / end * (1.0 - 1e-12)))
+        return np.full(n, length / n)
+    steps = max(1, math.ceil(math.log(fine / end) / math.log(growth) - 1e-9))
+    graded = np.minimum(end * growth ** np.arange(steps, dtype=float), fine)
+    covered = np.cumsum(graded)
+    if covered[-1] >= length * (1.0 - 1e-12):
+        cells = graded[: int(np.searchsorted(covered, length * (1.0 - 1e-12))) + 1]
+    else:
+        rest = length - covered[-1]
+        n = math.ceil(rest / fine * (1.0 - 1e-12))
+        if rest / n * growth >= graded[-1]:  # equal cells take the rest: the end cell exact
+            return np.concatenate([np.full(n, rest / n), graded[::-1]])
+        cells = np.concatenate([graded, np.full(n, fine)])
+    return (cells * (length / cells.sum()))[::-1]
+
+
 def graded_axis(
     lo: float,
     hi: float,
@@ -70,12 +97,16 @@ def graded_axis(
     fine: float,
     growth: float,
     max_cell: float = math.inf,
+    hi_cell: float | None = None,
 ) -> np.ndarray:
     """Node coordinates (n,) from lo to hi, uniform (<= fine) on ``region``, geometric outside.
 
     ``region`` (a, b) with a <= b is clipped to [lo, hi]; a region shorter than one fine cell
-    (e.g. a point) becomes the fine cell centred on it. A gap shorter than one fine cell between the region and the
-    block's end joins the region, so no sliver cell is left at the boundary.
+    (e.g. a point) becomes the fine cell centred on it. A gap shorter than one fine cell between
+    the region and the block's end joins the region, so no sliver cell is left at the boundary.
+    ``hi_cell`` (m, at most ``fine``): the region's cells shrink toward its high end to this
+    length there, by at most ``growth`` per cell (``refined_end``; e.g. the top surface); the
+    cells outside the region grow from its end cells.
     """
     if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
         raise MeshError(f"axis bounds must be finite with hi > lo, got ({lo}, {hi})")
@@ -104,9 +135,19 @@ def graded_axis(
             f"(at most {MAX_AXIS_NODES})"
         )
     h = (b - a) / n_region
-    left = _outer_cells(a - lo, h, growth, max_cell)[::-1]
-    right = _outer_cells(hi - b, h, growth, max_cell)
-    cells = np.concatenate([left, np.full(n_region, h), right])
+    inner = np.full(n_region, h)
+    if hi_cell is not None:
+        hi_cell = _check_length("end cell", hi_cell)
+        if hi_cell > fine:
+            raise MeshError(f"end cell ({hi_cell} m) must not exceed the fine spacing {fine} m")
+        if h > 0:  # else a collapsed region: the check below says so
+            inner = refined_end(b - a, h, hi_cell, growth)
+    # the cells outside grow from the region's (from its end cell above a refined end, and
+    # below it from the fine one unless the refinement reaches the region's low side)
+    low = float(inner[0]) if inner[0] * growth < h else h
+    left = _outer_cells(a - lo, low, growth, max_cell)[::-1]
+    right = _outer_cells(hi - b, float(inner[-1]), growth, max_cell)
+    cells = np.concatenate([left, inner, right])
     if cells.size + 1 > MAX_AXIS_NODES:
         raise MeshError(f"graded axis needs {cells.size + 1} nodes (at most {MAX_AXIS_NODES})")
     x = lo + np.concatenate([[0.0], np.cumsum(cells)])

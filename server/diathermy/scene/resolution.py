@@ -41,6 +41,12 @@ class Resolution(BaseModel):
     max_cell_m: Annotated[float, Field(gt=0, le=0.05, allow_inf_nan=False)] = Field(
         6.25e-3, description="largest cell anywhere, m"
     )
+    surface_m: Annotated[float, Field(ge=2e-5, le=0.05, allow_inf_nan=False)] | None = Field(
+        None,
+        description="cell height at the top surface over the working region, m: the cells "
+        "shrink from fine_m to it by at most growth per cell, so the thin layer under the "
+        "contact that boils first is resolved; None: fine_m up to the surface",
+    )
     margin_m: Annotated[float, Field(ge=0, le=0.1, allow_inf_nan=False)] = Field(
         2e-3, description="default working region: sideways margin beyond the contacts, m"
     )
@@ -58,6 +64,10 @@ class Resolution(BaseModel):
         if self.max_cell_m < self.fine_m:
             raise ValueError(
                 f"max_cell_m ({self.max_cell_m} m) must be at least fine_m ({self.fine_m} m)"
+            )
+        if self.surface_m is not None and self.surface_m > self.fine_m:
+            raise ValueError(
+                f"surface_m ({self.surface_m} m) must not exceed fine_m ({self.fine_m} m)"
             )
         if self.region_m is not None:
             lo, hi = self.region_m
@@ -137,5 +147,6 @@ def graded_grid(
         resolution.fine_m,
         growth=resolution.growth,
         max_cell_m=resolution.max_cell_m,
+        top_cell_m=resolution.surface_m,
         size_m=(float(block_m[0]), float(block_m[1]), float(block_m[2])),
     )
