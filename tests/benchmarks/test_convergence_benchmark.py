@@ -117,3 +117,45 @@ def test_ladder_compares_each_contact_at_the_finest_draped_end(
         "flat contact at t = 0.50 s, cut volume / depth against its 0.2 mm run: 0.4 mm 0.80 / 0.80"
         in text
     )
+
+
+def test_surface_refined_ladder_sits_beside_the_plain_runs(bench: ModuleType) -> None:
+    """Refined runs form their own ladder, each beside the plain run of its fine spacing, with
+    ratios against the finest refined run at the times it reached; the tag names the surface."""
+    assert bench.tag_of(0.4, False, surface_mm=0.1) == "fixed_0.4mm_s0.1"
+    refined = bench.scene_for(0.4, moving=False, surface_mm=0.1)
+    assert refined.resolution.surface_m == pytest.approx(1e-4)
+    assert bench.scene_for(0.4, moving=False, surface_mm=0).resolution.surface_m is None
+    t = np.arange(1, 101) * 0.03
+
+    def run(fine: float, surface: float, scale: float, t100: float) -> dict[str, np.ndarray]:
+        return {
+            "time_s": t,
+            "cut_m3": scale * t * 1e-9,
+            "depth_m": t * 1e-3,
+            "t_max_k": 310.15 + (373.15 - 310.15) * t / t100,
+            "w_front": 1e3 * t / 0.06,  # reaches kappa = 1e3 at 0.06 s
+            "kappa": np.array(1e3),
+            "fine_mm": np.array(fine),
+            "surface_mm": np.array(surface),
+            "n_nodes": np.array(1000),
+            "wall_s": np.ones_like(t),
+            "power_w": np.full_like(t, 40.0),
+            "p_max_pa": np.full_like(t, 2e5),
+            "max_rss_mib": np.array(1.0),
+        }
+
+    runs = {
+        "fixed_0.4mm": run(0.4, 0.0, 0.8, 0.03),
+        "fixed_0.4mm_s0.1": run(0.4, 0.1, 0.95, 0.02),
+        "fixed_0.2mm_s0.05": run(0.2, 0.05, 1.0, 0.02),
+    }
+    text = "\n".join(
+        bench._surface_lines(runs, ["fixed_0.4mm_s0.1", "fixed_0.2mm_s0.05"], ["fixed_0.4mm"])
+    )
+    assert "against the finest refined run (fixed_0.2mm_s0.05)" in text
+    assert "cut 1.62 s mm^3 | / finest | cut 3 s mm^3 | / finest |" in text
+    rows = [r for r in text.splitlines() if r.startswith("| 0.")]
+    assert [r.split(" | ")[1] for r in rows] == ["0", "0.1", "0.05"]  # plain beside refined
+    assert "| 0.4 mm | 0 | 1000 | 0.0300 | 0.0600 | 1.000 | 1.30 | 0.800 | 2.40 | 0.800 |" in text
+    assert "| 0.4 mm | 0.1 | 1000 | 0.0200 | 0.0600 | 1.000 | 1.54 | 0.950 | 2.85 | 0.950 |" in text
