@@ -8,6 +8,8 @@ halving fine spacing, the paper's moving electrode, and the uniform 33x33x65 bes
     python benchmarks/convergence.py power --fine-mm 0.8 0.4 0.2 0.1        # step-1 power only
     python benchmarks/convergence.py main-job                               # default vs uniform
     python benchmarks/convergence.py probe --fine-mm 0.8 0.4 --steps 40     # under the contact
+    python benchmarks/convergence.py run --fine-mm 0.4 --surface-mm 0.1      # surface-refined
+    python benchmarks/convergence.py cost --fine-mm 0.4 --surface-mm 0.1     # its step cost
     python benchmarks/convergence.py report                                 # table + plot
 
 ``run`` steps the fixed-electrode scene (current-density drive, 5.72e4 A/m^2 over the 1.17 mm
@@ -458,6 +460,79 @@ def main_job(steps: int) -> Path:
     return out
 
 
+def surface_cost(fine_mm: float, surface_mm: float, warm: int, steps: int) -> Path:
+    """What the surface refinement costs a step: the fixed electrode (current-density drive,
+    the incremental default) on the plain grid of ``fine_mm`` and on the one refined to
+    ``surface_mm`` at the top, ``warm`` steps each (past the first cut), then ``steps`` steps
+    each, alternating, so the shared machine's load falls on both alike."""
+    sims = {
+        name: Simulation(scene_for(fine_mm, moving=False, surface_mm=surface))
+        for name, surface in (("plain", 0.0), ("surface", surface_mm))
+    }
+    for sim in sims.values():
+        for _ in range(warm):
+            sim.step()
+    walls: dict[str, list[float]] = {k: [] for k in sims}
+    effects: dict[str, dict[str, list[float]]] = {k: {} for k in sims}
+    for _ in range(steps):
+        for name, sim in sims.items():
+            t0 = time.perf_counter()
+            r = sim.step()
+            walls[name].append(time.perf_counter() - t0)
+            for eff, er in r.effects.items():
+                effects[name].setdefault(eff, []).append(er.wall_s if er.ran else 0.0)
+    rows = {
+        name: {
+            "surface_mm": surface,
+            "shape": list(sims[name].grid.shape),
+            "nodes": sims[name].grid.n_nodes,
+            "median_s": float(np.median(walls[name])),
+            "mean_s": float(np.mean(walls[name])),
+            "effects_median_s": {e: float(np.median(v)) for e, v in effects[name].items()},
+        }
+        for name, surface in (("plain", 0.0), ("surface", surface_mm))
+    }
+    out = RESULTS / "convergence_surface_cost.json"
+    out.write_text(
+        json.dumps({"fine_mm": fine_mm, "warm": warm, "steps": steps, "runs": rows}, indent=1),
+        encoding="utf-8",
+    )
+    print(f"{out.name}: median {rows['surface']['median_s'] / rows['plain']['median_s']:.2f}x")
+    return out
+
+
+def _cost_lines() -> list[str]:
+    path = RESULTS / "convergence_surface_cost.json"
+    if not path.exists():
+        return []
+    c = json.loads(path.read_text())
+    p, r = c["runs"]["plain"], c["runs"]["surface"]
+    effs = sorted(set(p["effects_median_s"]) | set(r["effects_median_s"]))
+    lines = [
+        "",
+        f"What the surface refinement costs (`cost --fine-mm {c['fine_mm']:g} --surface-mm "
+        f"{r['surface_mm']:g}`): both grids in one process, {c['warm']} steps each past the "
+        f"first cut, then {c['steps']} steps each, alternating (incremental default):",
+        "",
+        "| grid | surface mm | nodes | median step s | mean step s | "
+        + " | ".join(f"{e} s" for e in effs)
+        + " |",
+        "|---|---:|---:|---:|---:|" + "---:|" * len(effs),
+    ]
+    for q in (p, r):
+        lines.append(
+            f"| {'x'.join(map(str, q['shape']))} | {q['surface_mm']:g} | {q['nodes']} | "
+            f"{q['median_s']:.2f} | {q['mean_s']:.2f} | "
+            + " | ".join(f"{q['effects_median_s'].get(e, 0.0):.3f}" for e in effs)
+            + " |"
+        )
+    lines.append(
+        f"\nRefined / plain: median step {r['median_s'] / p['median_s']:.2f}x, mean "
+        f"{r['mean_s'] / p['mean_s']:.2f}x, nodes {r['nodes'] / p['nodes']:.3f}x."
+    )
+    return lines
+
+
 def _ref_powers() -> tuple[float, float]:
     current = 5.72e4 * math.pi * 1.17e-3**2
     eq_w = current**2 * equipotential_disk_resistance(0.33, 1.17e-3)
@@ -531,12 +606,13 @@ def _surface_lines(
         "top surface to the given height there, so the layer under the contact that heats and "
         "boils first (its thermal diffusion length over the first 0.03 s step is ~0.07 mm) is "
         "resolved in depth. Beside each, the plain grid of the same fine spacing; ratios "
-        f"against the finest refined run ({top}).",
+        f"against the finest refined run ({top}). The runs' step times come from different "
+        "days' code: the cost of the refinement is measured below, both grids in one run.",
         "",
         "| grid | surface mm | nodes | 100 C interp. s | first cut interp. s | first cut / finest | "
         + " | ".join(f"cut {t:g} s mm^3 | / finest" for t in times)
-        + " | median step s |",
-        "|---|---:|---:|---:|---:|---:|" + "---:|---:|" * len(times) + "---:|",
+        + " |",
+        "|---|---:|---:|---:|---:|---:|" + "---:|---:|" * len(times),
     ]
     fin = summary(runs[top])
     by_fine = {float(runs[k]["fine_mm"]): k for k in plain}
@@ -557,7 +633,7 @@ def _surface_lines(
                 f"{_fmt(s_['t100_interp'], 1.0, 4)} | {_fmt(s_['cut_interp'], 1.0, 4)} | "
                 f"{_fmt(s_['cut_interp'] / fin['cut_interp'], 1.0, 3)} | "
                 + " | ".join(cells)
-                + f" | {s_['step_median']:.2f} |"
+                + " |"
             )
     if len(keys) >= 3:
         a, b, c = (summary(runs[k]) for k in keys[-3:])
@@ -850,6 +926,7 @@ def report() -> None:
         and float(runs[k]["dt_s"]) == DT_S
     ]
     lines += _surface_lines(runs, surfaced, fixed)
+    lines += _cost_lines()
     if moving:
         lines += [
             "",
@@ -951,6 +1028,11 @@ def main(argv: list[str] | None = None) -> int:
     pr = sub.add_parser("probe")
     pr.add_argument("--fine-mm", type=float, nargs="+", required=True)
     pr.add_argument("--steps", type=int, default=40)
+    co = sub.add_parser("cost")
+    co.add_argument("--fine-mm", type=float, default=0.4)
+    co.add_argument("--surface-mm", type=float, default=0.1)
+    co.add_argument("--warm", type=int, default=4)
+    co.add_argument("--steps", type=int, default=10)
     sub.add_parser("report")
     a = ap.parse_args(argv)
     if a.cmd == "run":
@@ -967,6 +1049,8 @@ def main(argv: list[str] | None = None) -> int:
             contact=a.contact,
             surface_mm=a.surface_mm,
         )
+    elif a.cmd == "cost":
+        surface_cost(a.fine_mm, a.surface_mm, a.warm, a.steps)
     elif a.cmd == "power":
         power(a.fine_mm)
     elif a.cmd == "main-job":

@@ -157,5 +157,20 @@ def test_surface_refined_ladder_sits_beside_the_plain_runs(bench: ModuleType) ->
     assert "cut 1.62 s mm^3 | / finest | cut 3 s mm^3 | / finest |" in text
     rows = [r for r in text.splitlines() if r.startswith("| 0.")]
     assert [r.split(" | ")[1] for r in rows] == ["0", "0.1", "0.05"]  # plain beside refined
-    assert "| 0.4 mm | 0 | 1000 | 0.0300 | 0.0600 | 1.000 | 1.30 | 0.800 | 2.40 | 0.800 |" in text
+    assert "| 0.4 mm | 0 | 1000 | 0.0300 | 0.0600 | 1.000 | 1.30 | 0.800 | 2.40 | 0.800 |\n" in text
     assert "| 0.4 mm | 0.1 | 1000 | 0.0200 | 0.0600 | 1.000 | 1.54 | 0.950 | 2.85 | 0.950 |" in text
+
+
+def test_surface_cost_steps_both_grids_and_reports_the_ratio(
+    bench: ModuleType, tmp_path: Path, monkeypatch
+) -> None:
+    """The cost comparison on a coarse grid: both grids step, the refined one has more nodes
+    and its top cell, and the report states the ratio."""
+    monkeypatch.setattr(bench, "RESULTS", tmp_path)
+    out = bench.surface_cost(4.0, 1.0, warm=1, steps=2)
+    c = json.loads(out.read_text())
+    plain, refined = c["runs"]["plain"], c["runs"]["surface"]
+    assert refined["nodes"] > plain["nodes"] and refined["surface_mm"] == 1.0
+    assert plain["median_s"] > 0 and "electric" in refined["effects_median_s"]
+    text = "\n".join(bench._cost_lines())
+    assert "Refined / plain: median step" in text and "| 1 |" in text
