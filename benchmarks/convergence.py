@@ -637,11 +637,17 @@ def _surface_lines(
             )
     if len(keys) >= 3:
         a, b, c = (summary(runs[k]) for k in keys[-3:])
+
+        def order(q: str) -> str:
+            d1, d2 = a[q] - b[q], b[q] - c[q]
+            if d1 * d2 < 0:  # the finest step went the other way: no asymptotic order
+                return f"not monotone ({b[q] / a[q]:.3f} then {c[q] / b[q]:.3f} of the coarser)"
+            return f"{observed_order(a[q], b[q], c[q]):.2f}"
+
         lines.append(
             f"\nObserved order over the refined ladder ({', '.join(keys[-3:])}): 100 C "
-            f"{observed_order(a['t100_interp'], b['t100_interp'], c['t100_interp']):.2f}, first "
-            f"cut {observed_order(a['cut_interp'], b['cut_interp'], c['cut_interp']):.2f} (from the "
-            "sizes of the differences, whatever their signs; NaN: a value missing or equal)."
+            f"{order('t100_interp')}, first cut {order('cut_interp')}, cut volume at 3 s "
+            f"{order('cut3')} (NaN: a value missing or equal)."
         )
     return lines
 
