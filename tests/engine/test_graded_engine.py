@@ -35,8 +35,15 @@ def test_graded_scene_meshes_fine_under_the_electrode():
     assert max(np.diff(a).max() for a in (x, y, z)) <= 2e-3 + 1e-12
 
 
-def test_graded_run_cuts_and_balances_energy():
-    sim = Simulation(graded_scene())
+@pytest.mark.parametrize("surface_m", [None, 0.125e-3])
+def test_graded_run_cuts_and_balances_energy(surface_m):
+    """Also on a grid refined toward the surface (``resolution.surface_m``: 4:1 cells at the
+    top)."""
+    res = RES.model_copy(update={"surface_m": surface_m})
+    sim = Simulation(tiny_scene(resolution=res))
+    if surface_m is not None:
+        top = np.diff(sim.grid.axes()[2])[-1]  # at most surface_m: 1.5 mm of region is short
+        assert 0.5 * surface_m < top <= surface_m * (1 + 1e-9)
     reports = sim.run(25)
     cut = [r.cut_volume_m3 for r in reports]
     assert cut[-1] > 0 and all(b >= a for a, b in zip(cut, cut[1:], strict=False))

@@ -4,7 +4,8 @@ The ``resolution`` section of a scene (issue #21) replaces the uniform ``grid`` 
 tensor-product grid (``Grid.graded``): cells of at most ``fine_m`` over a working box, growing by
 ``growth`` per cell (capped at ``max_cell_m``) to the block's faces. The working box is given, or
 by default the electrodes' contacts (a path's bounding box for a moving electrode) plus
-``margin_m`` sideways and ``depth_m`` down from the top surface.
+``margin_m`` sideways and ``depth_m`` down from the top surface. ``surface_m`` (optional) shrinks
+the box's cells toward its top side to that height, by the same growth ratio.
 """
 
 from __future__ import annotations
