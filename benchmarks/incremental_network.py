@@ -1,0 +1,467 @@
+"""Issue #22, item 3: does a network that starts from persistence beat persistence on its own?
+
+    python benchmarks/incremental_network.py [--train-runs 8] [--steps 60] [--epochs 12]
+                                             [--width 16] [--work runs/incremental_network]
+
+One run, one grid: the `default` scene's graded grid (24x32x48, 1 mm under the electrode), the
+grid of the set-up's main job. Training data: FEM runs (every step solved in full) of variants of
+the default scene on that same grid (its working region fixed): the electrode off the centre by
+up to 1.5 mm, 25-90 W, a power jump x0.4-2.5 and a 3-step pause at random steps. Every mechanics
+step gives one sample (p_prev, p, u_prev, u, phi). The last two runs validate (model selection);
+none is the held-out scene.
+
+Two networks are trained on the same samples, the same epochs and the same loss (L2 of the
+normalised output plus L2 of its differences along each axis, the strain): the paper-style
+`direct` CNN (p - p0, phi, mask -> u; per-sample amplitude) and the `incremental` one
+(``diathermy.surrogates.incremental``: the last displacement and the pressure change -> the
+change of u; it starts as persistence). Held out: the `default` scene as shipped (50 W, the
+centre, never generated for training), and the same with a power jump x2 at 0.9 s and the
+electrode moved 1 mm at 1.35 s. Each of its mechanics steps is scored against its own FEM
+answer (``relative_strain_energy_error``), alone (Ritz-scaled) and with the engine's patch:
+persistence, the direct CNN, the incremental CNN fed the FEM run's last displacement, and the
+incremental CNN fed its own last prediction (``chained``: what it does with no solver behind it).
+
+Writes benchmarks/results/incremental_network.md and .json; the models go to --work.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import statistics
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+RESULTS = Path(__file__).resolve().parent / "results"
+PREDICTORS = ("previous", "direct", "incremental", "chained")
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One training (or held-out) run: electrode offset (m), power (W), events by step."""
+
+    name: str
+    offset_m: tuple[float, float] = (0.0, 0.0)
+    power_w: float = 50.0
+    jump_at: int = -1
+    jump_factor: float = 1.0
+    pause_at: int = -1
+    move_at: int = -1
+    move_m: tuple[float, float] = (0.0, 0.0)
+
+
+def base_scene() -> Any:
+    """The default scene on its own grid, its working region written out, full solves."""
+    from diathermy.scene import builtin_scene
+    from diathermy.scene.resolution import working_region
+
+    scene = builtin_scene("default")
+    res = scene.resolution
+    region = working_region(res, scene.block_m, scene.electrodes)
+    return scene.model_copy(
+        update={
+            "resolution": res.model_copy(update={"region_m": region}),
+            "solver": scene.solver.model_copy(update={"incremental": False}),
+        }
+    )
+
+
+def variant_scene(base: Any, v: Variant) -> Any:
+    el = base.electrodes[0]
+    x, y = el.position_m
+    moved = el.model_copy(
+        update={"position_m": (x + v.offset_m[0], y + v.offset_m[1]), "power_w": v.power_w}
+    )
+    return base.model_copy(update={"name": v.name, "electrodes": [moved]})
+
+
+def training_variants(n: int, steps: int, seed: int) -> list[Variant]:
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(n):
+        out.append(
+            Variant(
+                name=f"train-{i}",
+                offset_m=tuple(float(d) for d in rng.uniform(-1.5e-3, 1.5e-3, 2)),  # type: ignore[arg-type]
+                power_w=float(rng.uniform(25, 90)),
+                jump_at=int(rng.integers(steps // 4, steps)),
+                jump_factor=float(np.exp(rng.uniform(np.log(0.4), np.log(2.5)))),
+                pause_at=int(rng.integers(steps // 4, steps)) if rng.uniform() < 0.5 else -1,
+            )
+        )
+    return out
+
+
+HELD_OUT = (
+    Variant("default"),
+    Variant("default-jump-move", jump_at=30, jump_factor=2.0, move_at=45, move_m=(1e-3, 0.0)),
+)
+
+
+def steps_of(base: Any, v: Variant, steps: int) -> Iterator[tuple[Any, dict[str, np.ndarray]]]:
+    """(simulation, sample) after each step of ``v`` whose mechanics ran; the sample holds the
+    grid fields the mechanics saw and solved: p_prev, p, u_prev, u, phi."""
+    from diathermy.engine.simulation import Simulation
+
+    sim = Simulation(variant_scene(base, v))
+    shape = sim.disc.grid.shape
+    name = sim.scene.electrodes[0].name
+    power = v.power_w
+    for k in range(steps):
+        if k == v.jump_at:
+            power *= v.jump_factor
+            sim.set_electrode(name, power_w=power)
+        if k == v.pause_at:
+            sim.set_electrode(name, active=False)
+        if k == v.pause_at + 3 and v.pause_at >= 0:
+            sim.set_electrode(name, active=True)
+        if k == v.move_at:
+            x, y = sim.scene.electrodes[0].position_m
+            sim.set_electrode(name, position_m=(x + v.move_m[0], y + v.move_m[1]))
+        p_prev = sim.state["pressure"].reshape(shape).copy()
+        u_prev = sim.state["displacement"].reshape(*shape, 3).copy()
+        phi = sim.state["level_set"].reshape(shape).copy()
+        rep = sim.step()
+        if not rep.ran("mechanics"):
+            continue
+        yield sim, {
+            "p_prev": p_prev,
+            "p": sim.state["pressure"].reshape(shape).copy(),
+            "u_prev": u_prev,
+            "u": sim.state["displacement"].reshape(*shape, 3).copy(),
+            "phi": phi,
+        }
+
+
+def stack(samples: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    out = {k: np.stack([s[k] for s in samples]).astype(np.float32) for k in samples[0]}
+    for k in ("u", "u_prev"):
+        out[k] = np.moveaxis(out[k], -1, 1)  # (S, 3, D, H, W)
+    return out
+
+
+def difference_loss(pred: Any, target: Any) -> Any:
+    """L2 of the output plus L2 of its differences along each axis (the strain's proxy)."""
+    import torch
+
+    loss = torch.mean((pred - target) ** 2)
+    for ax in (2, 3, 4):
+        loss = loss + torch.mean((torch.diff(pred, dim=ax) - torch.diff(target, dim=ax)) ** 2)
+    return loss
+
+
+def train(
+    model: Any,
+    batch_of: Callable[[np.ndarray], tuple[Any, Any]],
+    n_train: int,
+    n_val: int,
+    *,
+    epochs: int,
+    lr: float,
+    batch: int,
+    seed: int,
+    log: Callable[[str], None],
+) -> tuple[Any, list[dict[str, float]]]:
+    """Adam with a cosine learning rate; keeps the weights of the best validation loss.
+
+    ``batch_of(indices)`` -> (model output, target) for sample indices (training first, then the
+    ``n_val`` validation samples)."""
+    import torch
+
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    opt = torch.optim.Adam(model.parameters(), lr=lr)
+    n_it = epochs * max(1, n_train // batch)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, n_it, eta_min=lr / 100)
+    best, best_state, history = float("inf"), None, []
+    for epoch in range(epochs):
+        t0 = time.perf_counter()
+        model.train()
+        order = rng.permutation(n_train)
+        losses = []
+        for i in range(0, n_train - batch + 1, batch):
+            pred, target = batch_of(order[i : i + batch])
+            loss = difference_loss(pred, target)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+            losses.append(float(loss.detach()))
+        model.eval()
+        with torch.no_grad():
+            val = [
+                float(difference_loss(*batch_of(np.array([n_train + j])))) for j in range(n_val)
+            ]
+        v = float(np.mean(val)) if val else float(np.mean(losses))
+        history.append({"epoch": epoch + 1, "train": float(np.mean(losses)), "val": v})
+        log(f"epoch {epoch + 1}: train {np.mean(losses):.4g} val {v:.4g} ({time.perf_counter() - t0:.0f} s)")
+        if v < best:
+            best = v
+            best_state = {k: t.detach().clone() for k, t in model.state_dict().items()}
+    if best_state is not None:
+        model.load_state_dict(best_state)
+    return model, history
+
+
+def train_direct(data: dict[str, np.ndarray], n_train: int, args: Any, log: Any) -> Any:
+    import torch
+
+    from diathermy.surrogates.cnn import CNNConfig, DisplacementCNN
+    from diathermy.surrogates.normalization import fit_scales
+
+    scales = fit_scales(
+        data["p"][:n_train], data["phi"][:n_train], np.moveaxis(data["u"][:n_train], 1, -1),
+        per_sample_amplitude=True,
+    )  # fmt: skip
+    model = DisplacementCNN(CNNConfig(width=args.width, mask_input=True), scales)
+    T = {k: torch.from_numpy(v) for k, v in data.items()}
+
+    def batch_of(idx: np.ndarray) -> tuple[Any, Any]:
+        p, phi, u = T["p"][idx], T["phi"][idx], T["u"][idx]
+        x = model.normalizer.encode_inputs(p, phi)
+        return model(x), model.normalizer.encode_displacement(u, p)
+
+    n_val = len(data["p"]) - n_train
+    return train(model, batch_of, n_train, n_val, epochs=args.epochs, lr=args.lr,
+                 batch=args.batch, seed=args.seed, log=log)  # fmt: skip
+
+
+def train_incremental(data: dict[str, np.ndarray], n_train: int, args: Any, log: Any) -> Any:
+    import torch
+
+    from diathermy.surrogates.incremental import IncrementalCNN, IncrementalConfig, fit_gain
+
+    gain = fit_gain(data["p"][:n_train], data["p_prev"][:n_train], data["u"][:n_train], 101325.0)
+    model = IncrementalCNN(IncrementalConfig(width=args.width, gain_m_per_pa=gain))
+    T = {k: torch.from_numpy(v) for k, v in data.items()}
+
+    def batch_of(idx: np.ndarray) -> tuple[Any, Any]:
+        p, pp, up, phi, u = (T[k][idx] for k in ("p", "p_prev", "u_prev", "phi", "u"))
+        x, g = model.encode(p, pp, up, phi)
+        return model(x), (u - up) / g
+
+    n_val = len(data["p"]) - n_train
+    return train(model, batch_of, n_train, n_val, epochs=args.epochs, lr=args.lr,
+                 batch=args.batch, seed=args.seed, log=log)  # fmt: skip
+
+
+def score_held_out(base: Any, v: Variant, steps: int, direct: Any, inc: Any) -> list[dict]:
+    """Every predictor on every mechanics step of held-out ``v`` against its FEM answer."""
+    import torch
+
+    from diathermy.engine.backends import fem_of
+    from diathermy.physics.materials import ersatz_youngs_modulus
+    from diathermy.physics.predictor_errors import StepSystem, score_start
+    from diathermy.physics.strain_energy import strain_energy_density
+
+    rows: list[dict] = []
+    chain: np.ndarray | None = None
+    graph = None
+    for sim, s in steps_of(base, v, steps):
+        t = sim.tissue
+        solver = fem_of(sim.mechanics).solver  # type: ignore[union-attr]
+        healthy = ~sim.state["removed"]
+        E = ersatz_youngs_modulus(healthy, t.youngs_modulus_pa, t.ersatz_stiffness_ratio)
+        if solver.fragments.loose.any():
+            E[solver.fragments.loose] = t.ersatz_stiffness_ratio * E.max()
+        system = StepSystem.of(solver, sim.state["pressure"], t.p_atm_pa, graph)
+        graph = system.graph
+        W_ref = sim.state["strain_energy"]
+        grads, tets = sim.disc.geom.grads, sim.disc.mesh.tets
+
+        def W(u: np.ndarray, E: np.ndarray = E) -> np.ndarray:
+            return strain_energy_density(grads, tets, u, E, t.poisson_ratio)
+
+        def tensor(a: np.ndarray) -> Any:
+            return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))[None]
+
+        def nodal(u_grid: Any) -> np.ndarray:
+            return np.moveaxis(u_grid[0].numpy(), 0, -1).reshape(-1, 3).astype(np.float64)
+
+        def direct_u() -> np.ndarray:
+            with torch.no_grad():
+                return nodal(direct.predict_displacement(tensor(s["p"]), tensor(s["phi"])))
+
+        def inc_u(u_prev: np.ndarray) -> np.ndarray:
+            up = tensor(np.moveaxis(u_prev, -1, 0))
+            with torch.no_grad():
+                return nodal(inc.predict_displacement(tensor(s["p"]), tensor(s["p_prev"]), up,
+                                                      tensor(s["phi"])))  # fmt: skip
+
+        if chain is None:
+            chain = s["u_prev"]
+        u_prev_nodal = s["u_prev"].reshape(-1, 3).astype(np.float64)
+        fns: dict[str, Callable[[], np.ndarray]] = {
+            "previous": lambda: u_prev_nodal,
+            "direct": direct_u,
+            "incremental": lambda: inc_u(s["u_prev"]),
+            "chained": lambda: inc_u(chain),  # noqa: B023 (evaluated at once)
+        }
+        row: dict[str, Any] = {
+            "scene": v.name,
+            "step": sim.step_index,
+            "max_pressure_pa": float(sim.state["pressure"].max()),
+            "removed_tets": int((~healthy).sum()),
+        }
+        for name, fn in fns.items():
+            alone, patched = score_start(system, name, fn, W, W_ref)
+            for sc in (alone, patched):
+                row[f"{sc.name}_error"], row[f"{sc.name}_s"] = sc.error, sc.cost_s
+            if name == "chained":  # the chain goes on from its own (Ritz-scaled) answer
+                start = system.start(name, fn())
+                chain = start.u.reshape(s["u_prev"].shape).astype(np.float32)
+        rows.append(row)
+    return rows
+
+
+def summarise(rows: list[dict]) -> list[dict]:
+    out = []
+    for scene in dict.fromkeys(r["scene"] for r in rows):
+        rs = [r for r in rows if r["scene"] == scene]
+        for name in PREDICTORS:
+            for suffix in ("", "+patch"):
+                key = f"{name}{suffix}"
+                e = [r[f"{key}_error"] for r in rs]
+                c = [r[f"{key}_s"] for r in rs]
+                out.append({
+                    "scene": scene, "predictor": key, "steps": len(rs),
+                    "max": max(e), "mean": float(np.mean(e)), "median_s": statistics.median(c),
+                })  # fmt: skip
+    return out
+
+
+def write_report(out: Path, meta: dict, summary: list[dict], rows: list[dict]) -> None:
+    def pct(x: float) -> str:
+        return f"{100 * x:.3g} %"
+
+    lines = [
+        "# The incremental network against persistence (issue #22, item 3)",
+        "",
+        f"`{meta['command']}` on {meta['machine']}, started {meta['started']}; whole run "
+        f"{meta['minutes']:.1f} min. Grid {meta['grid']} (the `default` scene's graded grid). "
+        f"Training: {meta['train_runs']} FEM runs of {meta['steps']} steps "
+        f"({meta['n_train']} samples, {meta['n_val']} validation samples from the last two runs), "
+        f"width {meta['width']}, {meta['epochs']} epochs, batch {meta['batch']}, lr {meta['lr']} "
+        f"(cosine); training {meta['train_min_direct']:.1f} min (direct) and "
+        f"{meta['train_min_incremental']:.1f} min (incremental). Held out: "
+        + ", ".join(f"`{v.name}`" for v in HELD_OUT)
+        + " (see the script's docstring).",
+        "",
+        "Strain-energy error of every mechanics step against the FEM solve of that step (max / "
+        "mean over the steps) and the median cost per step (prediction, Ritz scale, patch). "
+        "`previous`: persistence; `direct`: the paper-style CNN; `incremental`: the new network "
+        "fed the FEM run's last displacement; `chained`: the same fed its own last answer.",
+        "",
+        "| scene | predictor | steps | max | mean | median s |",
+        "|---|---|---:|---:|---:|---:|",
+    ]
+    for s in summary:
+        lines.append(
+            f"| {s['scene']} | {s['predictor']} | {s['steps']} | {pct(s['max'])} | "
+            f"{pct(s['mean'])} | {s['median_s']:.3f} |"
+        )
+    lines += ["", "Training history (loss of the normalised output and its differences):", ""]
+    lines += ["| model | epoch | train | validation |", "|---|---:|---:|---:|"]
+    for model in ("direct", "incremental"):
+        for h in meta[f"history_{model}"]:
+            lines.append(f"| {model} | {h['epoch']} | {h['train']:.4g} | {h['val']:.4g} |")
+    lines += ["", "Per step (error %):", ""]
+    keys = [f"{n}{s}" for n in PREDICTORS for s in ("", "+patch")]
+    lines += ["| scene | step | p max MPa | removed | " + " | ".join(keys) + " |"]
+    lines += ["|---|---:|---:|---:|" + "---:|" * len(keys)]
+    for r in rows:
+        vals = " | ".join(f"{100 * r[f'{k}_error']:.3g}" for k in keys)
+        lines.append(
+            f"| {r['scene']} | {r['step']} | {r['max_pressure_pa'] / 1e6:.2f} | "
+            f"{r['removed_tets']} | {vals} |"
+        )
+    notes = out.with_name(out.stem + "_notes.md")
+    if notes.exists():
+        lines += ["", notes.read_text().rstrip()]
+    out.write_text("\n".join(lines) + "\n")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument("--train-runs", type=int, default=8)
+    ap.add_argument("--steps", type=int, default=60, help="steps per run (training and held out)")
+    ap.add_argument("--epochs", type=int, default=12)
+    ap.add_argument("--width", type=int, default=16)
+    ap.add_argument("--batch", type=int, default=2)
+    ap.add_argument("--lr", type=float, default=1e-3)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--threads", type=int, default=1, help="torch threads for the training")
+    ap.add_argument("--work", type=Path, default=Path("runs/incremental_network"))
+    ap.add_argument("--out", type=Path, default=RESULTS / "incremental_network.md")
+    args = ap.parse_args(argv)
+    if args.train_runs < 3 or args.steps < 4 or args.epochs < 1 or args.width < 1:
+        ap.error("need --train-runs >= 3, --steps >= 4, --epochs >= 1, --width >= 1")
+    import torch
+
+    from diathermy.runtime import configure_threads
+
+    configure_threads()
+    torch.set_num_threads(max(1, args.threads))
+    t_start, started = time.perf_counter(), time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+    args.work.mkdir(parents=True, exist_ok=True)
+
+    def log(msg: str) -> None:
+        print(f"[{time.perf_counter() - t_start:7.1f} s] {msg}", flush=True)
+
+    base = base_scene()
+    variants = training_variants(args.train_runs, args.steps, args.seed)
+    per_run = []
+    for v in variants:
+        per_run.append([s for _, s in steps_of(base, v, args.steps)])
+        log(f"{v.name}: {len(per_run[-1])} samples")
+    train_samples = [s for run in per_run[:-2] for s in run]
+    val_samples = [s for run in per_run[-2:] for s in run]
+    data = stack(train_samples + val_samples)
+    n_train = len(train_samples)
+    t0 = time.perf_counter()
+    direct, hist_d = train_direct(data, n_train, args, log)
+    t1 = time.perf_counter()
+    inc, hist_i = train_incremental(data, n_train, args, log)
+    t2 = time.perf_counter()
+    for name, m in (("direct", direct), ("incremental", inc)):
+        torch.save({"constructor_args": m.constructor_args(), "state": m.state_dict()},
+                   args.work / f"{name}.pt")  # fmt: skip
+    direct.eval()
+    inc.eval()
+    rows = []
+    for v in HELD_OUT:
+        rows += score_held_out(base, v, args.steps, direct, inc)
+        log(f"held out {v.name}: {sum(r['scene'] == v.name for r in rows)} steps")
+    summary = summarise(rows)
+    grid = "x".join(str(n) for n in data["p"].shape[1:])
+    meta = {
+        "command": "python benchmarks/incremental_network.py "
+        f"--train-runs {args.train_runs} --steps {args.steps} --epochs {args.epochs} "
+        f"--width {args.width}",
+        "machine": f"{platform.machine()}, 2 shared cores, torch on {args.threads} thread(s)",
+        "started": started,
+        "minutes": (time.perf_counter() - t_start) / 60,
+        "grid": grid, "train_runs": args.train_runs, "steps": args.steps,
+        "n_train": n_train, "n_val": len(val_samples), "width": args.width,
+        "epochs": args.epochs, "batch": args.batch, "lr": args.lr,
+        "train_min_direct": (t1 - t0) / 60, "train_min_incremental": (t2 - t1) / 60,
+        "history_direct": hist_d, "history_incremental": hist_i,
+        "variants": [v.__dict__ for v in variants],
+    }  # fmt: skip
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    write_report(args.out, meta, summary, rows)
+    args.out.with_suffix(".json").write_text(
+        json.dumps({"meta": meta, "summary": summary, "rows": rows}, indent=1) + "\n"
+    )
+    log(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
