@@ -130,13 +130,16 @@ def steps_of(base: Any, v: Variant, steps: int) -> Iterator[tuple[Any, dict[str,
         rep = sim.step()
         if not rep.ran("mechanics"):
             continue
-        yield sim, {
-            "p_prev": p_prev,
-            "p": sim.state["pressure"].reshape(shape).copy(),
-            "u_prev": u_prev,
-            "u": sim.state["displacement"].reshape(*shape, 3).copy(),
-            "phi": phi,
-        }
+        yield (
+            sim,
+            {
+                "p_prev": p_prev,
+                "p": sim.state["pressure"].reshape(shape).copy(),
+                "u_prev": u_prev,
+                "u": sim.state["displacement"].reshape(*shape, 3).copy(),
+                "phi": phi,
+            },
+        )
 
 
 def stack(samples: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
@@ -195,12 +198,12 @@ def train(
             losses.append(float(loss.detach()))
         model.eval()
         with torch.no_grad():
-            val = [
-                float(difference_loss(*batch_of(np.array([n_train + j])))) for j in range(n_val)
-            ]
+            val = [float(difference_loss(*batch_of(np.array([n_train + j])))) for j in range(n_val)]
         v = float(np.mean(val)) if val else float(np.mean(losses))
         history.append({"epoch": epoch + 1, "train": float(np.mean(losses)), "val": v})
-        log(f"epoch {epoch + 1}: train {np.mean(losses):.4g} val {v:.4g} ({time.perf_counter() - t0:.0f} s)")
+        log(
+            f"epoch {epoch + 1}: train {np.mean(losses):.4g} val {v:.4g} ({time.perf_counter() - t0:.0f} s)"
+        )
         if v < best:
             best = v
             best_state = {k: t.detach().clone() for k, t in model.state_dict().items()}
@@ -244,80 +247,93 @@ def train_incremental(data: dict[str, np.ndarray], n_train: int, args: Any, log:
     def batch_of(idx: np.ndarray) -> tuple[Any, Any]:
         p, pp, up, phi, u = (T[k][idx] for k in ("p", "p_prev", "u_prev", "phi", "u"))
         x, g = model.encode(p, pp, up, phi)
-        return model(x), (u - up) / g
+        return model(x), torch.where(g > 0, (u - up) / torch.where(g > 0, g, 1.0), 0.0)
 
     n_val = len(data["p"]) - n_train
     return train(model, batch_of, n_train, n_val, epochs=args.epochs, lr=args.lr,
                  batch=args.batch, seed=args.seed, log=log)  # fmt: skip
 
 
-def score_held_out(base: Any, v: Variant, steps: int, direct: Any, inc: Any) -> list[dict]:
-    """Every predictor on every mechanics step of held-out ``v`` against its FEM answer."""
-    import torch
+@dataclass
+class Scorer:
+    """Scores every predictor on the steps of one held-out run against their FEM answers."""
 
-    from diathermy.engine.backends import fem_of
-    from diathermy.physics.materials import ersatz_youngs_modulus
-    from diathermy.physics.predictor_errors import StepSystem, score_start
-    from diathermy.physics.strain_energy import strain_energy_density
+    direct: Any
+    incremental: Any
+    chain: np.ndarray | None = None  # the chained network's last answer (D, H, W, 3) m
+    graph: Any = None
 
-    rows: list[dict] = []
-    chain: np.ndarray | None = None
-    graph = None
-    for sim, s in steps_of(base, v, steps):
+    def predict_direct(self, s: dict[str, np.ndarray]) -> np.ndarray:
+        import torch
+
+        with torch.no_grad():
+            u = self.direct.predict_displacement(_tensor(s["p"]), _tensor(s["phi"]))
+        return _nodal(u)
+
+    def predict_incremental(self, s: dict[str, np.ndarray], u_prev: np.ndarray) -> np.ndarray:
+        import torch
+
+        args = (_tensor(s["p"]), _tensor(s["p_prev"]), _tensor(np.moveaxis(u_prev, -1, 0)))
+        with torch.no_grad():
+            u = self.incremental.predict_displacement(*args, _tensor(s["phi"]))
+        return _nodal(u)
+
+    def row(self, sim: Any, s: dict[str, np.ndarray], scene: str) -> dict[str, Any]:
+        from diathermy.engine.backends import fem_of
+        from diathermy.physics.materials import ersatz_youngs_modulus
+        from diathermy.physics.predictor_errors import StepSystem, score_start
+        from diathermy.physics.strain_energy import strain_energy_density
+
         t = sim.tissue
-        solver = fem_of(sim.mechanics).solver  # type: ignore[union-attr]
+        solver = fem_of(sim.mechanics).solver
         healthy = ~sim.state["removed"]
         E = ersatz_youngs_modulus(healthy, t.youngs_modulus_pa, t.ersatz_stiffness_ratio)
         if solver.fragments.loose.any():
             E[solver.fragments.loose] = t.ersatz_stiffness_ratio * E.max()
-        system = StepSystem.of(solver, sim.state["pressure"], t.p_atm_pa, graph)
-        graph = system.graph
-        W_ref = sim.state["strain_energy"]
-        grads, tets = sim.disc.geom.grads, sim.disc.mesh.tets
+        system = StepSystem.of(solver, sim.state["pressure"], t.p_atm_pa, self.graph)
+        self.graph = system.graph
+        grads, tets, nu = sim.disc.geom.grads, sim.disc.mesh.tets, t.poisson_ratio
 
-        def W(u: np.ndarray, E: np.ndarray = E) -> np.ndarray:
-            return strain_energy_density(grads, tets, u, E, t.poisson_ratio)
+        def W(u: np.ndarray) -> np.ndarray:
+            return strain_energy_density(grads, tets, u, E, nu)
 
-        def tensor(a: np.ndarray) -> Any:
-            return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))[None]
-
-        def nodal(u_grid: Any) -> np.ndarray:
-            return np.moveaxis(u_grid[0].numpy(), 0, -1).reshape(-1, 3).astype(np.float64)
-
-        def direct_u() -> np.ndarray:
-            with torch.no_grad():
-                return nodal(direct.predict_displacement(tensor(s["p"]), tensor(s["phi"])))
-
-        def inc_u(u_prev: np.ndarray) -> np.ndarray:
-            up = tensor(np.moveaxis(u_prev, -1, 0))
-            with torch.no_grad():
-                return nodal(inc.predict_displacement(tensor(s["p"]), tensor(s["p_prev"]), up,
-                                                      tensor(s["phi"])))  # fmt: skip
-
-        if chain is None:
-            chain = s["u_prev"]
-        u_prev_nodal = s["u_prev"].reshape(-1, 3).astype(np.float64)
+        chain = s["u_prev"] if self.chain is None else self.chain
+        u_chain = self.predict_incremental(s, chain)
         fns: dict[str, Callable[[], np.ndarray]] = {
-            "previous": lambda: u_prev_nodal,
-            "direct": direct_u,
-            "incremental": lambda: inc_u(s["u_prev"]),
-            "chained": lambda: inc_u(chain),  # noqa: B023 (evaluated at once)
+            "previous": lambda: s["u_prev"].reshape(-1, 3).astype(np.float64),
+            "direct": lambda: self.predict_direct(s),
+            "incremental": lambda: self.predict_incremental(s, s["u_prev"]),
+            "chained": lambda: u_chain,
         }
         row: dict[str, Any] = {
-            "scene": v.name,
+            "scene": scene,
             "step": sim.step_index,
             "max_pressure_pa": float(sim.state["pressure"].max()),
             "removed_tets": int((~healthy).sum()),
         }
         for name, fn in fns.items():
-            alone, patched = score_start(system, name, fn, W, W_ref)
-            for sc in (alone, patched):
+            for sc in score_start(system, name, fn, W, sim.state["strain_energy"]):
                 row[f"{sc.name}_error"], row[f"{sc.name}_s"] = sc.error, sc.cost_s
-            if name == "chained":  # the chain goes on from its own (Ritz-scaled) answer
-                start = system.start(name, fn())
-                chain = start.u.reshape(s["u_prev"].shape).astype(np.float32)
-        rows.append(row)
-    return rows
+        # the chain goes on from its own Ritz-scaled answer, never from the FEM's
+        self.chain = system.start("chained", u_chain).u.reshape(s["u_prev"].shape)
+        return row
+
+
+def _tensor(a: np.ndarray) -> Any:
+    import torch
+
+    return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))[None]
+
+
+def _nodal(u_grid: Any) -> np.ndarray:
+    """(1, 3, D, H, W) tensor -> (n_nodes, 3) float64."""
+    return np.moveaxis(u_grid[0].numpy(), 0, -1).reshape(-1, 3).astype(np.float64)
+
+
+def score_held_out(base: Any, v: Variant, steps: int, direct: Any, inc: Any) -> list[dict]:
+    """Every predictor on every mechanics step of held-out ``v`` against its FEM answer."""
+    scorer = Scorer(direct, inc)
+    return [scorer.row(sim, s, v.name) for sim, s in steps_of(base, v, steps)]
 
 
 def summarise(rows: list[dict]) -> list[dict]:

@@ -75,7 +75,8 @@ class IncrementalCNN(nn.Module):
         self.head = ConvAct(w, w, 1, slope)
         self.out = nn.Conv3d(w, OUT_CHANNELS, 1)
         nn.init.zeros_(self.out.weight)  # an untrained model predicts no change: persistence
-        nn.init.zeros_(self.out.bias)
+        if self.out.bias is not None:
+            nn.init.zeros_(self.out.bias)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """(N, 7, D, H, W) normalised inputs -> (N, 3, D, H, W) normalised change of u."""
@@ -86,10 +87,11 @@ class IncrementalCNN(nn.Module):
         return conv3d_same(self.head(y), self.out.weight, self.out.bias)
 
     def amplitude(self, p_new: torch.Tensor, p_prev: torch.Tensor) -> torch.Tensor:
-        """(N, D, H, W) pressures Pa -> (N,) a = max |p - p0| over both steps (1 Pa if 0)."""
+        """(N, D, H, W) pressures Pa -> (N,) a = max |p - p0| over both steps, Pa (0: none)."""
         p0 = self.config.p0_pa
-        a = torch.maximum((p_new - p0).abs().flatten(1).amax(1), (p_prev - p0).abs().flatten(1).amax(1))
-        return torch.where(a > 0, a, torch.ones_like(a))
+        return torch.maximum(
+            (p_new - p0).abs().flatten(1).amax(1), (p_prev - p0).abs().flatten(1).amax(1)
+        )
 
     def encode(
         self,
@@ -98,24 +100,25 @@ class IncrementalCNN(nn.Module):
         u_prev: torch.Tensor,
         phi_new: torch.Tensor,
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """Physical fields -> ((N, 7, D, H, W) inputs, (N, 1, 1, 1, 1) metres per output unit).
+        """Physical fields -> ((N, 7, D, H, W) inputs, (N, 1, 1, 1, 1) metres per output unit,
+        0 for a sample with no overpressure at either step: nothing loads it, nothing changes).
 
         p_new, p_prev: (N, D, H, W) Pa; u_prev: (N, 3, D, H, W) m; phi_new: (N, D, H, W) m.
         """
         c = self.config
         a = self.amplitude(p_new, p_prev).view(-1, 1, 1, 1)
-        gain = (a * c.gain_m_per_pa).view(-1, 1, 1, 1, 1)
+        safe = torch.where(a > 0, a, torch.ones_like(a))  # no overpressure: no change (gain 0)
         x = torch.cat(
             [
-                ((p_new - p_prev) / a).unsqueeze(1),
-                ((p_prev - c.p0_pa) / a).unsqueeze(1),
-                u_prev / gain,
+                ((p_new - p_prev) / safe).unsqueeze(1),
+                ((p_prev - c.p0_pa) / safe).unsqueeze(1),
+                u_prev / (safe * c.gain_m_per_pa).unsqueeze(1),
                 (phi_new / c.level_set_scale_m).unsqueeze(1),
                 (phi_new > 0).to(p_new.dtype).unsqueeze(1),
             ],
             dim=1,
         )
-        return x, gain
+        return x, (a * c.gain_m_per_pa).unsqueeze(1)
 
     def predict_displacement(
         self,
