@@ -19,7 +19,8 @@ centre, never generated for training), and the same with a power jump x2 at 0.9 
 electrode moved 1 mm at 1.35 s. Each of its mechanics steps is scored against its own FEM
 answer (``relative_strain_energy_error``), alone (Ritz-scaled) and with the engine's patch:
 persistence, the direct CNN, the incremental CNN fed the FEM run's last displacement, and the
-incremental CNN fed its own last prediction (``chained``: what it does with no solver behind it).
+incremental CNN fed its own last prediction from the direct one's first (``chained``: the networks
+with no solver behind them).
 
 Writes benchmarks/results/incremental_network.md and .json; the models go to --work.
 """
@@ -104,9 +105,11 @@ HELD_OUT = (
 )
 
 
-def steps_of(base: Any, v: Variant, steps: int) -> Iterator[tuple[Any, dict[str, np.ndarray]]]:
-    """(simulation, sample) after each step of ``v`` whose mechanics ran; the sample holds the
-    grid fields the mechanics saw and solved: p_prev, p, u_prev, u, phi."""
+def steps_of(
+    base: Any, v: Variant, steps: int
+) -> Iterator[tuple[Any, np.ndarray, dict[str, np.ndarray]]]:
+    """(simulation, healthy tets, sample) after each step of ``v`` whose mechanics ran: the
+    topology and the grid fields the mechanics saw and solved (p_prev, p, u_prev, u, phi)."""
     from diathermy.engine.simulation import Simulation
 
     sim = Simulation(variant_scene(base, v))
@@ -127,19 +130,18 @@ def steps_of(base: Any, v: Variant, steps: int) -> Iterator[tuple[Any, dict[str,
         p_prev = sim.state["pressure"].reshape(shape).copy()
         u_prev = sim.state["displacement"].reshape(*shape, 3).copy()
         phi = sim.state["level_set"].reshape(shape).copy()
+        healthy = ~sim.state["removed"]  # the topology this step's mechanics solves on
         rep = sim.step()
         if not rep.ran("mechanics"):
             continue
-        yield (
-            sim,
-            {
-                "p_prev": p_prev,
-                "p": sim.state["pressure"].reshape(shape).copy(),
-                "u_prev": u_prev,
-                "u": sim.state["displacement"].reshape(*shape, 3).copy(),
-                "phi": phi,
-            },
-        )
+        sample = {
+            "p_prev": p_prev,
+            "p": sim.state["pressure"].reshape(shape).copy(),
+            "u_prev": u_prev,
+            "u": sim.state["displacement"].reshape(*shape, 3).copy(),
+            "phi": phi,
+        }
+        yield sim, healthy, sample
 
 
 def stack(samples: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
@@ -147,6 +149,29 @@ def stack(samples: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
     for k in ("u", "u_prev"):
         out[k] = np.moveaxis(out[k], -1, 1)  # (S, 3, D, H, W)
     return out
+
+
+def training_data(
+    base: Any, variants: list[Variant], args: Any, log: Callable[[str], None]
+) -> tuple[dict[str, np.ndarray], int]:
+    """The stacked samples of every run (the last two runs last: validation) and the number of
+    training samples; kept in ``--work`` as data.npz and reused by a run with the same runs,
+    steps and seed (the FEM runs are most of a run's time)."""
+    key = json.dumps([v.__dict__ for v in variants] + [args.steps], sort_keys=True)
+    cache = args.work / "data.npz"
+    if cache.exists():
+        with np.load(cache) as f:
+            if str(f["key"]) == key:
+                log(f"training data from {cache}")
+                return {k: f[k] for k in f.files if k not in ("key", "n_train")}, int(f["n_train"])
+    per_run = []
+    for v in variants:
+        per_run.append([s for _, _, s in steps_of(base, v, args.steps)])
+        log(f"{v.name}: {len(per_run[-1])} samples")
+    train = [s for run in per_run[:-2] for s in run]
+    data = stack(train + [s for run in per_run[-2:] for s in run])
+    np.savez(cache, key=np.array(key), n_train=np.array(len(train)), **data)
+    return data, len(train)
 
 
 def difference_loss(pred: Any, target: Any) -> Any:
@@ -238,10 +263,18 @@ def train_direct(data: dict[str, np.ndarray], n_train: int, args: Any, log: Any)
 def train_incremental(data: dict[str, np.ndarray], n_train: int, args: Any, log: Any) -> Any:
     import torch
 
-    from diathermy.surrogates.incremental import IncrementalCNN, IncrementalConfig, fit_gain
+    from diathermy.surrogates.incremental import (
+        IncrementalCNN,
+        IncrementalConfig,
+        fit_change_gain,
+        fit_gain,
+    )
 
-    gain = fit_gain(data["p"][:n_train], data["p_prev"][:n_train], data["u"][:n_train], 101325.0)
-    model = IncrementalCNN(IncrementalConfig(width=args.width, gain_m_per_pa=gain))
+    d = {k: v[:n_train] for k, v in data.items()}
+    gain = fit_gain(d["p"], d["p_prev"], d["u"], 101325.0)
+    change = fit_change_gain(d["p"], d["p_prev"], d["u"], d["u_prev"], 101325.0)
+    config = IncrementalConfig(width=args.width, gain_m_per_pa=gain, change_gain_m_per_pa=change)
+    model = IncrementalCNN(config)
     T = {k: torch.from_numpy(v) for k, v in data.items()}
 
     def batch_of(idx: np.ndarray) -> tuple[Any, Any]:
@@ -278,7 +311,9 @@ class Scorer:
             u = self.incremental.predict_displacement(*args, _tensor(s["phi"]))
         return _nodal(u)
 
-    def row(self, sim: Any, s: dict[str, np.ndarray], scene: str) -> dict[str, Any]:
+    def row(
+        self, sim: Any, healthy: np.ndarray, s: dict[str, np.ndarray], scene: str
+    ) -> dict[str, Any]:
         from diathermy.engine.backends import fem_of
         from diathermy.physics.materials import ersatz_youngs_modulus
         from diathermy.physics.predictor_errors import StepSystem, score_start
@@ -286,7 +321,6 @@ class Scorer:
 
         t = sim.tissue
         solver = fem_of(sim.mechanics).solver
-        healthy = ~sim.state["removed"]
         E = ersatz_youngs_modulus(healthy, t.youngs_modulus_pa, t.ersatz_stiffness_ratio)
         if solver.fragments.loose.any():
             E[solver.fragments.loose] = t.ersatz_stiffness_ratio * E.max()
@@ -297,8 +331,12 @@ class Scorer:
         def W(u: np.ndarray) -> np.ndarray:
             return strain_energy_density(grads, tets, u, E, nu)
 
-        chain = s["u_prev"] if self.chain is None else self.chain
-        u_chain = self.predict_incremental(s, chain)
+        # the networks alone: the direct one where there is nothing before (the first mechanics
+        # step), then the incremental one from its own last answer, never from the FEM's
+        if self.chain is None:
+            u_chain = self.predict_direct(s)
+        else:
+            u_chain = self.predict_incremental(s, self.chain)
         fns: dict[str, Callable[[], np.ndarray]] = {
             "previous": lambda: s["u_prev"].reshape(-1, 3).astype(np.float64),
             "direct": lambda: self.predict_direct(s),
@@ -314,7 +352,6 @@ class Scorer:
         for name, fn in fns.items():
             for sc in score_start(system, name, fn, W, sim.state["strain_energy"]):
                 row[f"{sc.name}_error"], row[f"{sc.name}_s"] = sc.error, sc.cost_s
-        # the chain goes on from its own Ritz-scaled answer, never from the FEM's
         self.chain = system.start("chained", u_chain).u.reshape(s["u_prev"].shape)
         return row
 
@@ -333,7 +370,7 @@ def _nodal(u_grid: Any) -> np.ndarray:
 def score_held_out(base: Any, v: Variant, steps: int, direct: Any, inc: Any) -> list[dict]:
     """Every predictor on every mechanics step of held-out ``v`` against its FEM answer."""
     scorer = Scorer(direct, inc)
-    return [scorer.row(sim, s, v.name) for sim, s in steps_of(base, v, steps)]
+    return [scorer.row(sim, h, s, v.name) for sim, h, s in steps_of(base, v, steps)]
 
 
 def summarise(rows: list[dict]) -> list[dict]:
@@ -372,7 +409,7 @@ def write_report(out: Path, meta: dict, summary: list[dict], rows: list[dict]) -
         "Strain-energy error of every mechanics step against the FEM solve of that step (max / "
         "mean over the steps) and the median cost per step (prediction, Ritz scale, patch). "
         "`previous`: persistence; `direct`: the paper-style CNN; `incremental`: the new network "
-        "fed the FEM run's last displacement; `chained`: the same fed its own last answer.",
+        "fed the FEM run's last displacement; `chained`: the networks alone, the direct one on the first mechanics step and then the incremental one fed its own last answer.",
         "",
         "| scene | predictor | steps | max | mean | median s |",
         "|---|---|---:|---:|---:|---:|",
@@ -432,14 +469,8 @@ def main(argv: list[str] | None = None) -> int:
 
     base = base_scene()
     variants = training_variants(args.train_runs, args.steps, args.seed)
-    per_run = []
-    for v in variants:
-        per_run.append([s for _, s in steps_of(base, v, args.steps)])
-        log(f"{v.name}: {len(per_run[-1])} samples")
-    train_samples = [s for run in per_run[:-2] for s in run]
-    val_samples = [s for run in per_run[-2:] for s in run]
-    data = stack(train_samples + val_samples)
-    n_train = len(train_samples)
+    data, n_train = training_data(base, variants, args, log)
+    n_val = len(data["p"]) - n_train
     t0 = time.perf_counter()
     direct, hist_d = train_direct(data, n_train, args, log)
     t1 = time.perf_counter()
@@ -464,7 +495,7 @@ def main(argv: list[str] | None = None) -> int:
         "started": started,
         "minutes": (time.perf_counter() - t_start) / 60,
         "grid": grid, "train_runs": args.train_runs, "steps": args.steps,
-        "n_train": n_train, "n_val": len(val_samples), "width": args.width,
+        "n_train": n_train, "n_val": n_val, "width": args.width,
         "epochs": args.epochs, "batch": args.batch, "lr": args.lr,
         "train_min_direct": (t1 - t0) / 60, "train_min_incremental": (t2 - t1) / 60,
         "history_direct": hist_d, "history_incremental": hist_i,

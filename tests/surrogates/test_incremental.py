@@ -7,7 +7,12 @@ import numpy as np
 import pytest
 import torch
 
-from diathermy.surrogates.incremental import IncrementalCNN, IncrementalConfig, fit_gain
+from diathermy.surrogates.incremental import (
+    IncrementalCNN,
+    IncrementalConfig,
+    fit_change_gain,
+    fit_gain,
+)
 
 P0 = 101325.0
 SHAPE = (5, 6, 7)
@@ -98,3 +103,29 @@ def test_fit_gain_is_max_displacement_per_pa() -> None:
     u[1, 0, 1, 1, 1] = -2e-4  # 1e-9 m/Pa
     assert fit_gain(p_new, p_prev, u, P0) == pytest.approx(1e-9)
     assert fit_gain(p_prev, p_prev, u, P0) == 1e-9  # nothing above p0: the floor
+
+
+def test_fit_change_gain_is_max_change_per_pa() -> None:
+    p_prev = np.full((1, *SHAPE), P0)
+    p_new = p_prev.copy()
+    p_new[0, 2, 2, 2] += 1e5
+    u_prev = np.zeros((1, 3, *SHAPE))
+    u_prev[0, 1, 3, 3, 3] = 5e-5
+    u_new = u_prev.copy()
+    u_new[0, 1, 3, 3, 3] += 1e-5  # a change of 1e-5 m at 1e5 Pa: 1e-10 m/Pa
+    assert fit_change_gain(p_new, p_prev, u_new, u_prev, P0) == pytest.approx(1e-10)
+    assert fit_gain(p_new, p_prev, u_new, P0) == pytest.approx(6e-10)
+
+
+def test_the_output_uses_the_change_gain() -> None:
+    """The same weights with a 10x change gain predict a 10x change."""
+    model = _trained_looking()
+    args = model.constructor_args()
+    args["config"]["change_gain_m_per_pa"] *= 10.0
+    big = IncrementalCNN.from_constructor_args(args)
+    big.load_state_dict(model.state_dict())
+    p_new, p_prev, u_prev, phi = _fields(5)
+    with torch.no_grad():
+        d1 = model.predict_displacement(p_new, p_prev, u_prev, phi) - u_prev
+        d10 = big.eval().predict_displacement(p_new, p_prev, u_prev, phi) - u_prev
+    torch.testing.assert_close(d10, 10.0 * d1, rtol=1e-4, atol=1e-15)

@@ -13,7 +13,9 @@ learns what persistence misses (issue #22, item 3).
 Inputs (N, 7, D, H, W) = (nz, ny, nx) node grids: (p_new - p_prev) / a, (p_prev - p0) / a,
 u_prev / (a g) (3 components), phi_new / phi_scale and the tissue mask phi_new > 0, with one
 amplitude per sample a = max(max |p_new - p0|, max |p_prev - p0|) in Pa and a displacement gain g
-in m/Pa fitted to the data. Output (N, 3, D, H, W): (u_new - u_prev) / (a g). Scaling every
+in m/Pa fitted to the data. Output (N, 3, D, H, W): (u_new - u_prev) / (a g_change), with a gain
+of its own for the change (a step's change is a few per cent of u, and an O(1) target trains
+better). Scaling every
 overpressure and u_prev by c > 0 scales the predicted change by c, as the mechanics does.
 """
 
@@ -47,13 +49,14 @@ class IncrementalConfig:
     p0_pa: float = 101325.0
     level_set_scale_m: float = 1.0e-3
     gain_m_per_pa: float = 1.0e-9
+    change_gain_m_per_pa: float = 1.0e-10
 
     def __post_init__(self) -> None:
         if self.width < 1 or self.depth < 1:
             raise ValueError(f"width and depth must be >= 1, got {self.width}, {self.depth}")
         if any(int(k) < 2 for k in self.pools):
             raise ValueError(f"pools must be factors >= 2, got {self.pools}")
-        for name in ("level_set_scale_m", "gain_m_per_pa"):
+        for name in ("level_set_scale_m", "gain_m_per_pa", "change_gain_m_per_pa"):
             value = getattr(self, name)
             if not np.isfinite(value) or value <= 0.0:
                 raise ValueError(f"{name} must be a positive finite number, got {value}")
@@ -118,7 +121,7 @@ class IncrementalCNN(nn.Module):
             ],
             dim=1,
         )
-        return x, (a * c.gain_m_per_pa).unsqueeze(1)
+        return x, (a * c.change_gain_m_per_pa).unsqueeze(1)
 
     def predict_displacement(
         self,
@@ -143,20 +146,39 @@ class IncrementalCNN(nn.Module):
         return cls(IncrementalConfig(**cfg))
 
 
+def _rms_per_pa(a: np.ndarray, u: np.ndarray) -> float:
+    live = a > 0
+    if not live.any():
+        return 1.0e-9
+    umax = np.abs(u[live]).reshape(int(live.sum()), -1).max(1)
+    g = float(np.sqrt(np.mean((umax / a[live]) ** 2)))
+    return g if np.isfinite(g) and g > 0 else 1.0e-9
+
+
+def _amplitudes(p_new_pa: np.ndarray, p_prev_pa: np.ndarray, p0_pa: float) -> np.ndarray:
+    return np.maximum(
+        np.abs(p_new_pa - p0_pa).reshape(len(p_new_pa), -1).max(1),
+        np.abs(p_prev_pa - p0_pa).reshape(len(p_prev_pa), -1).max(1),
+    )
+
+
 def fit_gain(
     p_new_pa: np.ndarray, p_prev_pa: np.ndarray, u_new_m: np.ndarray, p0_pa: float
 ) -> float:
     """Displacement per Pa of overpressure (m/Pa): RMS over samples of max |u| / a.
 
     p_new_pa, p_prev_pa: (S, D, H, W) Pa; u_new_m: (S, 3, D, H, W) m. Samples at p = p0 are
-    left out; 1e-9 when none is left."""
-    a = np.maximum(
-        np.abs(p_new_pa - p0_pa).reshape(len(p_new_pa), -1).max(1),
-        np.abs(p_prev_pa - p0_pa).reshape(len(p_prev_pa), -1).max(1),
-    )
-    live = a > 0
-    if not live.any():
-        return 1.0e-9
-    umax = np.abs(u_new_m[live]).reshape(int(live.sum()), -1).max(1)
-    g = float(np.sqrt(np.mean((umax / a[live]) ** 2)))
-    return g if np.isfinite(g) and g > 0 else 1.0e-9
+    left out; 1e-9 when none is left (as when every max |u| / a is 0)."""
+    return _rms_per_pa(_amplitudes(p_new_pa, p_prev_pa, p0_pa), u_new_m)
+
+
+def fit_change_gain(
+    p_new_pa: np.ndarray,
+    p_prev_pa: np.ndarray,
+    u_new_m: np.ndarray,
+    u_prev_m: np.ndarray,
+    p0_pa: float,
+) -> float:
+    """Displacement change per Pa of overpressure (m/Pa): RMS of max |u_new - u_prev| / a
+    (shapes as in :func:`fit_gain`)."""
+    return _rms_per_pa(_amplitudes(p_new_pa, p_prev_pa, p0_pa), u_new_m - u_prev_m)
