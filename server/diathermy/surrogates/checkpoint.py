@@ -20,8 +20,10 @@ from diathermy.version import __version__
 FORMAT_NAME = "diathermy-cnn"
 # 1: two input channels; 2: a model with the tissue-mask channel (``CNNConfig.mask_input``), which
 # a reader of version 1 cannot build. Models without the mask are still written as version 1.
-FORMAT_VERSION = 2
-READABLE_VERSIONS = (1, 2)
+# 3: a U-Net body (``CNNConfig.arch`` "unet"). Each model is written with the lowest version
+# that can read it: older readers refuse what they cannot build instead of misreading it.
+FORMAT_VERSION = 3
+READABLE_VERSIONS = (1, 2, 3)
 _REQUIRED = ("constructor_args", "state_dict", "grid_shape", "spacing_m")
 
 
@@ -42,6 +44,13 @@ class LoadedCheckpoint:
     training_state: dict[str, Any] | None = None
 
 
+def format_version(model: DisplacementCNN) -> int:
+    """The lowest checkpoint version whose readers can build ``model``."""
+    if model.config.arch != "pooled":
+        return 3
+    return 2 if model.config.mask_input else 1
+
+
 def save_checkpoint(
     path: str | os.PathLike[str],
     model: DisplacementCNN,
@@ -56,7 +65,7 @@ def save_checkpoint(
     """Write ``model`` (on any device) atomically to ``path``; grid (nz, ny, nx), spacing (dx, dy, dz) m."""
     payload: dict[str, Any] = {
         "format": FORMAT_NAME,
-        "format_version": FORMAT_VERSION if model.config.mask_input else 1,
+        "format_version": format_version(model),
         "diathermy_version": __version__,
         "model": type(model).__name__,
         "constructor_args": model.constructor_args(),

@@ -4,6 +4,8 @@ Architecture (DESIGN.md, "Surrogates -> CNN"): ``depth`` stages of Conv3d + leak
 resolution; the first stage's output also feeds two branches averaged by 2 and by 4, each
 convolved and upsampled trilinearly to the exact grid size, summed with the full-resolution
 trunk; a 1x1x1 convolution + leaky ReLU and a final 1x1x1 convolution give the three components.
+``CNNConfig.arch`` "unet" swaps that body for a U-Net (``diathermy.surrogates.unet``) before the
+final convolution.
 """
 
 from __future__ import annotations
@@ -16,9 +18,11 @@ from torch import nn
 
 from diathermy.surrogates.layers import ConvAct, PooledBranch, conv3d_same
 from diathermy.surrogates.normalization import FieldNormalizer, FieldScales
+from diathermy.surrogates.unet import UNet3D
 
 IN_CHANNELS = 2  # (p - p0) / p_scale, phi / phi_scale
 OUT_CHANNELS = 3  # u_x, u_y, u_z / u_scale
+ARCHS = ("pooled", "unet")
 
 
 @dataclass(frozen=True)
@@ -32,8 +36,16 @@ class CNNConfig:
     # stiffness jumps there (healthy E vs the ersatz ratio); phi alone, a smooth distance, makes
     # the first layer learn a step from it.
     mask_input: bool = False
+    # "pooled": the paper's layout (trunk of ``depth`` convolutions, branches pooled by 2 and 4);
+    # "unet": a U-Net of ``levels`` levels (diathermy.surrogates.unet), which sees the whole block
+    arch: str = "pooled"
+    levels: int = 4
 
     def __post_init__(self) -> None:
+        if self.arch not in ARCHS:
+            raise ValueError(f"arch must be one of {ARCHS}, got {self.arch!r}")
+        if not 1 <= self.levels <= 6:
+            raise ValueError(f"levels must lie in 1..6, got {self.levels}")
         if self.width < 1:
             raise ValueError(f"width must be >= 1, got {self.width}")
         if self.depth < 1:
@@ -56,17 +68,25 @@ class DisplacementCNN(nn.Module):
         self.config = config or CNNConfig()
         w, slope = self.config.width, self.config.negative_slope
         self.normalizer = FieldNormalizer(scales or FieldScales())
-        self.stem = ConvAct(IN_CHANNELS + int(self.config.mask_input), w, 3, slope)
-        self.trunk = nn.Sequential(*(ConvAct(w, w, 3, slope) for _ in range(self.config.depth - 1)))
-        self.branch2 = PooledBranch(w, 2, slope)
-        self.branch4 = PooledBranch(w, 4, slope)
-        self.head = ConvAct(w, w, 1, slope)
+        n_in = IN_CHANNELS + int(self.config.mask_input)
+        if self.config.arch == "unet":
+            self.body = UNet3D(n_in, w, self.config.levels, slope)
+        else:
+            self.stem = ConvAct(n_in, w, 3, slope)
+            self.trunk = nn.Sequential(
+                *(ConvAct(w, w, 3, slope) for _ in range(self.config.depth - 1))
+            )
+            self.branch2 = PooledBranch(w, 2, slope)
+            self.branch4 = PooledBranch(w, 4, slope)
+            self.head = ConvAct(w, w, 1, slope)
         self.out = nn.Conv3d(w, OUT_CHANNELS, 1)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """(N, 2, D, H, W) normalised inputs -> (N, 3, D, H, W) normalised displacement."""
         if self.config.mask_input:
             x = torch.cat([x, (x[:, 1:2] > 0).to(x.dtype)], dim=1)  # phi's sign is unscaled
+        if self.config.arch == "unet":
+            return conv3d_same(self.body(x), self.out.weight, self.out.bias)
         h = self.stem(x)
         y = self.trunk(h) + self.branch2(h) + self.branch4(h)
         return conv3d_same(self.head(y), self.out.weight, self.out.bias)
@@ -92,7 +112,9 @@ class DisplacementCNN(nn.Module):
 
         The new channel's stem weights start at zero (fine-tuning then learns them), every other
         weight and the normaliser are copied. A model that already reads the mask is copied as is.
+        The paper's layout only (ValueError for a U-Net).
         """
+        self._pooled_only("with_mask_input")
         if self.config.mask_input:
             wider = type(self).from_constructor_args(self.constructor_args())
             wider.load_state_dict(self.state_dict())
@@ -116,8 +138,10 @@ class DisplacementCNN(nn.Module):
         get Gaussian noise of ``noise`` x that layer's weight RMS, which breaks the symmetry
         that would otherwise keep a copy equal to its original through training (and changes
         the output by about as much). A fine-tune then starts near this model's error with
-        more capacity instead of retraining from scratch.
+        more capacity instead of retraining from scratch. The paper's layout only (ValueError
+        for a U-Net).
         """
+        self._pooled_only("widened")
         old = self.config.width
         if width < old:
             raise ValueError(f"cannot narrow a width-{old} model to {width}")
@@ -144,6 +168,12 @@ class DisplacementCNN(nn.Module):
             state[name] = value
         wide.load_state_dict(state)
         return wide.to(next(self.parameters()).device)
+
+    def _pooled_only(self, what: str) -> None:
+        if self.config.arch != "pooled":
+            raise ValueError(
+                f"{what} works on the paper's layout only, not arch {self.config.arch!r}"
+            )
 
     def n_parameters(self) -> int:
         """Number of trainable scalars."""

@@ -29,17 +29,21 @@ import torch
 from torch import nn
 
 from diathermy.surrogates.layers import ConvAct, PooledBranch, conv3d_same
+from diathermy.surrogates.unet import UNet3D
 
 IN_CHANNELS = 7
 OUT_CHANNELS = 3
+ARCHS = ("pooled", "unet")
 
 
 @dataclass(frozen=True)
 class IncrementalConfig:
     """Constructor arguments of :class:`IncrementalCNN` (stored verbatim in checkpoints).
 
-    ``pools``: the averaging factors of the multi-scale branches beside the full-resolution trunk
-    (the paper's network has 2 and 4; 8 widens the receptive field toward the block's size).
+    ``arch``: "pooled", the paper's layout (a full-resolution trunk of ``depth`` convolutions
+    and branches pooled by each of ``pools``: 2 and 4 in the paper, 8 widens the receptive field
+    toward the block's size), or "unet", a U-Net of ``levels`` levels
+    (``diathermy.surrogates.unet``; ``depth`` and ``pools`` are then unused).
     """
 
     width: int = 16
@@ -50,10 +54,16 @@ class IncrementalConfig:
     level_set_scale_m: float = 1.0e-3
     gain_m_per_pa: float = 1.0e-9
     change_gain_m_per_pa: float = 1.0e-10
+    arch: str = "pooled"
+    levels: int = 4
 
     def __post_init__(self) -> None:
         if self.width < 1 or self.depth < 1:
             raise ValueError(f"width and depth must be >= 1, got {self.width}, {self.depth}")
+        if self.arch not in ARCHS:
+            raise ValueError(f"arch must be one of {ARCHS}, got {self.arch!r}")
+        if not 1 <= self.levels <= 6:
+            raise ValueError(f"levels must lie in 1..6, got {self.levels}")
         if any(int(k) < 2 for k in self.pools):
             raise ValueError(f"pools must be factors >= 2, got {self.pools}")
         for name in ("level_set_scale_m", "gain_m_per_pa", "change_gain_m_per_pa"):
@@ -71,11 +81,15 @@ class IncrementalCNN(nn.Module):
     def __init__(self, config: IncrementalConfig | None = None) -> None:
         super().__init__()
         self.config = config or IncrementalConfig()
-        w, slope = self.config.width, self.config.negative_slope
-        self.stem = ConvAct(IN_CHANNELS, w, 3, slope)
-        self.trunk = nn.Sequential(*(ConvAct(w, w, 3, slope) for _ in range(self.config.depth - 1)))
-        self.branches = nn.ModuleList(PooledBranch(w, int(k), slope) for k in self.config.pools)
-        self.head = ConvAct(w, w, 1, slope)
+        c = self.config
+        w, slope = c.width, c.negative_slope
+        if c.arch == "unet":
+            self.body = UNet3D(IN_CHANNELS, w, c.levels, slope)
+        else:
+            self.stem = ConvAct(IN_CHANNELS, w, 3, slope)
+            self.trunk = nn.Sequential(*(ConvAct(w, w, 3, slope) for _ in range(c.depth - 1)))
+            self.branches = nn.ModuleList(PooledBranch(w, int(k), slope) for k in c.pools)
+            self.head = ConvAct(w, w, 1, slope)
         self.out = nn.Conv3d(w, OUT_CHANNELS, 1)
         nn.init.zeros_(self.out.weight)  # an untrained model predicts no change: persistence
         if self.out.bias is not None:
@@ -83,6 +97,8 @@ class IncrementalCNN(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """(N, 7, D, H, W) normalised inputs -> (N, 3, D, H, W) normalised change of u."""
+        if self.config.arch == "unet":
+            return conv3d_same(self.body(x), self.out.weight, self.out.bias)
         h = self.stem(x)
         y = self.trunk(h)
         for branch in self.branches:
