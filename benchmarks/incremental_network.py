@@ -1,7 +1,12 @@
 """Issue #22, item 3: does a network that starts from persistence beat persistence on its own?
 
     python benchmarks/incremental_network.py [--train-runs 8] [--steps 60] [--epochs 12]
-                                             [--width 16] [--work runs/incremental_network]
+        [--width 16] [--batch 2] [--archs pooled unet] [--jobs N] [--device auto]
+        [--data-only] [--work runs/incremental_network]
+
+``--jobs``: FEM runs at once, one process each; ``--device``: where the networks train and
+predict (auto: the GPU when there is one); ``--data-only``: generate the training data into
+``--work`` (a later run with the same runs, steps and seed reads it back) and stop.
 
 One run, one grid: the `default` scene's graded grid (24x32x48, 1 mm under the electrode), the
 grid of the set-up's main job. Training data: FEM runs (every step solved in full) of variants of
@@ -29,11 +34,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import statistics
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -41,6 +48,14 @@ import numpy as np
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PREDICTORS = ("previous", "direct", "incremental", "chained")
+ARCHS = {"pooled": "", "unet": "-unet"}
+"""``--archs``: the networks' body (the paper's pooled layout or a U-Net) and the suffix of the
+predictors' names built on it."""
+
+
+def predictors(archs: list[str]) -> list[str]:
+    """Persistence, then the direct, incremental and chained predictors of each architecture."""
+    return ["previous"] + [f"{n}{ARCHS[a]}" for a in archs for n in PREDICTORS[1:]]
 
 
 @dataclass(frozen=True)
@@ -144,6 +159,15 @@ def steps_of(
         yield sim, healthy, sample
 
 
+def samples_of(job: tuple[Any, Variant, int]) -> list[dict[str, np.ndarray]]:
+    """Every sample of one run (a process pool's task: its arguments in one tuple)."""
+    from diathermy.runtime import configure_threads
+
+    configure_threads()
+    base, v, steps = job
+    return [s for _, _, s in steps_of(base, v, steps)]
+
+
 def stack(samples: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
     out = {k: np.stack([s[k] for s in samples]).astype(np.float32) for k in samples[0]}
     for k in ("u", "u_prev"):
@@ -165,9 +189,20 @@ def training_data(
                 log(f"training data from {cache}")
                 return {k: f[k] for k in f.files if k not in ("key", "n_train")}, int(f["n_train"])
     per_run = []
-    for v in variants:
-        per_run.append([s for _, _, s in steps_of(base, v, args.steps)])
-        log(f"{v.name}: {len(per_run[-1])} samples")
+    if args.jobs > 1:  # one FEM run per process (spawned: no torch state is inherited)
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        ctx = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(min(args.jobs, len(variants)), mp_context=ctx) as pool:
+            jobs = [(base, v, args.steps) for v in variants]
+            for v, run in zip(variants, pool.map(samples_of, jobs), strict=True):
+                per_run.append(run)
+                log(f"{v.name}: {len(run)} samples")
+    else:
+        for v in variants:
+            per_run.append(samples_of((base, v, args.steps)))
+            log(f"{v.name}: {len(per_run[-1])} samples")
     train = [s for run in per_run[:-2] for s in run]
     data = stack(train + [s for run in per_run[-2:] for s in run])
     np.savez(cache, key=np.array(key), n_train=np.array(len(train)), **data)
@@ -237,7 +272,9 @@ def train(
     return model, history
 
 
-def train_direct(data: dict[str, np.ndarray], n_train: int, args: Any, log: Any) -> Any:
+def train_direct(
+    data: dict[str, np.ndarray], n_train: int, args: Any, log: Any, arch: str = "pooled"
+) -> Any:
     import torch
 
     from diathermy.surrogates.cnn import CNNConfig, DisplacementCNN
@@ -247,11 +284,13 @@ def train_direct(data: dict[str, np.ndarray], n_train: int, args: Any, log: Any)
         data["p"][:n_train], data["phi"][:n_train], np.moveaxis(data["u"][:n_train], 1, -1),
         per_sample_amplitude=True,
     )  # fmt: skip
-    model = DisplacementCNN(CNNConfig(width=args.width, mask_input=True), scales)
-    T = {k: torch.from_numpy(v) for k, v in data.items()}
+    config = CNNConfig(width=args.width, mask_input=True, arch=arch)
+    model = DisplacementCNN(config, scales).to(args.device)
+    T = {k: torch.from_numpy(v).to(args.device) for k, v in data.items()}
 
     def batch_of(idx: np.ndarray) -> tuple[Any, Any]:
-        p, phi, u = T["p"][idx], T["phi"][idx], T["u"][idx]
+        i = torch.from_numpy(idx).to(args.device)
+        p, phi, u = T["p"][i], T["phi"][i], T["u"][i]
         x = model.normalizer.encode_inputs(p, phi)
         return model(x), model.normalizer.encode_displacement(u, p)
 
@@ -260,7 +299,9 @@ def train_direct(data: dict[str, np.ndarray], n_train: int, args: Any, log: Any)
                  batch=args.batch, seed=args.seed, log=log)  # fmt: skip
 
 
-def train_incremental(data: dict[str, np.ndarray], n_train: int, args: Any, log: Any) -> Any:
+def train_incremental(
+    data: dict[str, np.ndarray], n_train: int, args: Any, log: Any, arch: str = "pooled"
+) -> Any:
     import torch
 
     from diathermy.surrogates.incremental import (
@@ -273,12 +314,15 @@ def train_incremental(data: dict[str, np.ndarray], n_train: int, args: Any, log:
     d = {k: v[:n_train] for k, v in data.items()}
     gain = fit_gain(d["p"], d["p_prev"], d["u"], 101325.0)
     change = fit_change_gain(d["p"], d["p_prev"], d["u"], d["u_prev"], 101325.0)
-    config = IncrementalConfig(width=args.width, gain_m_per_pa=gain, change_gain_m_per_pa=change)
-    model = IncrementalCNN(config)
-    T = {k: torch.from_numpy(v) for k, v in data.items()}
+    config = IncrementalConfig(
+        width=args.width, gain_m_per_pa=gain, change_gain_m_per_pa=change, arch=arch
+    )
+    model = IncrementalCNN(config).to(args.device)
+    T = {k: torch.from_numpy(v).to(args.device) for k, v in data.items()}
 
     def batch_of(idx: np.ndarray) -> tuple[Any, Any]:
-        p, pp, up, phi, u = (T[k][idx] for k in ("p", "p_prev", "u_prev", "phi", "u"))
+        i = torch.from_numpy(idx).to(args.device)
+        p, pp, up, phi, u = (T[k][i] for k in ("p", "p_prev", "u_prev", "phi", "u"))
         x, g = model.encode(p, pp, up, phi)
         return model(x), torch.where(g > 0, (u - up) / torch.where(g > 0, g, 1.0), 0.0)
 
@@ -291,24 +335,28 @@ def train_incremental(data: dict[str, np.ndarray], n_train: int, args: Any, log:
 class Scorer:
     """Scores every predictor on the steps of one held-out run against their FEM answers."""
 
-    direct: Any
-    incremental: Any
-    chain: np.ndarray | None = None  # the chained network's last answer (D, H, W, 3) m
+    nets: dict[str, tuple[Any, Any]]  # predictor-name suffix -> (direct, incremental) network
+    # each chained predictor's last answer (D, H, W, 3) m
+    chains: dict[str, np.ndarray] = field(default_factory=dict)
     graph: Any = None
 
-    def predict_direct(self, s: dict[str, np.ndarray]) -> np.ndarray:
+    @staticmethod
+    def predict_direct(net: Any, s: dict[str, np.ndarray]) -> np.ndarray:
         import torch
 
+        dev = next(net.parameters()).device
         with torch.no_grad():
-            u = self.direct.predict_displacement(_tensor(s["p"]), _tensor(s["phi"]))
+            u = net.predict_displacement(_tensor(s["p"], dev), _tensor(s["phi"], dev))
         return _nodal(u)
 
-    def predict_incremental(self, s: dict[str, np.ndarray], u_prev: np.ndarray) -> np.ndarray:
+    @staticmethod
+    def predict_incremental(net: Any, s: dict[str, np.ndarray], u_prev: np.ndarray) -> np.ndarray:
         import torch
 
-        args = (_tensor(s["p"]), _tensor(s["p_prev"]), _tensor(np.moveaxis(u_prev, -1, 0)))
+        dev = next(net.parameters()).device
+        fields = (s["p"], s["p_prev"], np.moveaxis(u_prev, -1, 0), s["phi"])
         with torch.no_grad():
-            u = self.incremental.predict_displacement(*args, _tensor(s["phi"]))
+            u = net.predict_displacement(*(_tensor(f, dev) for f in fields))
         return _nodal(u)
 
     def row(
@@ -331,18 +379,22 @@ class Scorer:
         def W(u: np.ndarray) -> np.ndarray:
             return strain_energy_density(grads, tets, u, E, nu)
 
-        # the networks alone: the direct one where there is nothing before (the first mechanics
-        # step), then the incremental one from its own last answer, never from the FEM's
-        if self.chain is None:
-            u_chain = self.predict_direct(s)
-        else:
-            u_chain = self.predict_incremental(s, self.chain)
         fns: dict[str, Callable[[], np.ndarray]] = {
             "previous": lambda: s["u_prev"].reshape(-1, 3).astype(np.float64),
-            "direct": lambda: self.predict_direct(s),
-            "incremental": lambda: self.predict_incremental(s, s["u_prev"]),
-            "chained": lambda: u_chain,
         }
+        u_chain: dict[str, np.ndarray] = {}
+        for sfx, (direct, inc) in self.nets.items():
+            # the networks alone: the direct one where there is nothing before (the first
+            # mechanics step), then the incremental one from its own last answer, never the FEM's
+            last = self.chains.get(sfx)
+            u_chain[sfx] = (
+                self.predict_direct(direct, s)
+                if last is None
+                else self.predict_incremental(inc, s, last)
+            )
+            fns[f"direct{sfx}"] = partial(self.predict_direct, direct, s)
+            fns[f"incremental{sfx}"] = partial(self.predict_incremental, inc, s, s["u_prev"])
+            fns[f"chained{sfx}"] = partial(u_chain[sfx].copy)
         row: dict[str, Any] = {
             "scene": scene,
             "step": sim.step_index,
@@ -352,32 +404,61 @@ class Scorer:
         for name, fn in fns.items():
             for sc in score_start(system, name, fn, W, sim.state["strain_energy"]):
                 row[f"{sc.name}_error"], row[f"{sc.name}_s"] = sc.error, sc.cost_s
-        self.chain = system.start("chained", u_chain).u.reshape(s["u_prev"].shape)
+        for sfx, u in u_chain.items():
+            self.chains[sfx] = system.start("chained", u).u.reshape(s["u_prev"].shape)
         return row
 
 
-def _tensor(a: np.ndarray) -> Any:
+def _tensor(a: np.ndarray, device: Any) -> Any:
     import torch
 
-    return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))[None]
+    return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))[None].to(device)
 
 
 def _nodal(u_grid: Any) -> np.ndarray:
-    """(1, 3, D, H, W) tensor -> (n_nodes, 3) float64."""
-    return np.moveaxis(u_grid[0].numpy(), 0, -1).reshape(-1, 3).astype(np.float64)
+    """(1, 3, D, H, W) tensor on any device -> (n_nodes, 3) float64."""
+    return np.moveaxis(u_grid[0].cpu().numpy(), 0, -1).reshape(-1, 3).astype(np.float64)
 
 
-def score_held_out(base: Any, v: Variant, steps: int, direct: Any, inc: Any) -> list[dict]:
-    """Every predictor on every mechanics step of held-out ``v`` against its FEM answer."""
-    scorer = Scorer(direct, inc)
+def score_held_out(
+    base: Any, v: Variant, steps: int, nets: dict[str, tuple[Any, Any]]
+) -> list[dict]:
+    """Every predictor on every mechanics step of held-out ``v`` against its FEM answer
+    (``nets``: as :class:`Scorer`'s)."""
+    scorer = Scorer(nets)
     return [scorer.row(sim, h, s, v.name) for sim, h, s in steps_of(base, v, steps)]
 
 
-def summarise(rows: list[dict]) -> list[dict]:
+def score_from_files(
+    job: tuple[Any, Variant, int, dict[str, tuple[Path, Path]], str],
+) -> list[dict]:
+    """:func:`score_held_out` with the networks read from their files (a process pool's task)."""
+    import torch
+
+    from diathermy.runtime import configure_threads
+    from diathermy.surrogates.cnn import DisplacementCNN
+    from diathermy.surrogates.incremental import IncrementalCNN
+
+    configure_threads()
+    torch.set_num_threads(1)
+    base, v, steps, files, device = job
+    nets = {}
+    for sfx, (fd, fi) in files.items():
+        pair = []
+        for cls, f in ((DisplacementCNN, fd), (IncrementalCNN, fi)):
+            saved = torch.load(f, map_location=device, weights_only=True)
+            model = cls.from_constructor_args(saved["constructor_args"])
+            model.load_state_dict(saved["state"])
+            pair.append(model.to(device).eval())
+        nets[sfx] = (pair[0], pair[1])
+    return score_held_out(base, v, steps, nets)
+
+
+def summarise(rows: list[dict], names: list[str]) -> list[dict]:
     out = []
     for scene in dict.fromkeys(r["scene"] for r in rows):
         rs = [r for r in rows if r["scene"] == scene]
-        for name in PREDICTORS:
+        for name in names:
             for suffix in ("", "+patch"):
                 key = f"{name}{suffix}"
                 e = [r[f"{key}_error"] for r in rs]
@@ -401,15 +482,19 @@ def write_report(out: Path, meta: dict, summary: list[dict], rows: list[dict]) -
         f"Training: {meta['train_runs']} FEM runs of {meta['steps']} steps "
         f"({meta['n_train']} samples, {meta['n_val']} validation samples from the last two runs), "
         f"width {meta['width']}, {meta['epochs']} epochs, batch {meta['batch']}, lr {meta['lr']} "
-        f"(cosine); training {meta['train_min_direct']:.1f} min (direct) and "
-        f"{meta['train_min_incremental']:.1f} min (incremental). Held out: "
+        "(cosine); training "
+        + ", ".join(f"{m:.1f} min ({k})" for k, m in meta["train_minutes"].items())
+        + ". Held out: "
         + ", ".join(f"`{v.name}`" for v in HELD_OUT)
         + " (see the script's docstring).",
         "",
         "Strain-energy error of every mechanics step against the FEM solve of that step (max / "
         "mean over the steps) and the median cost per step (prediction, Ritz scale, patch). "
         "`previous`: persistence; `direct`: the paper-style CNN; `incremental`: the new network "
-        "fed the FEM run's last displacement; `chained`: the networks alone, the direct one on the first mechanics step and then the incremental one fed its own last answer.",
+        "fed the FEM run's last displacement; `chained`: the networks alone, the direct one on "
+        "the first mechanics step and then the incremental one fed its own last answer. "
+        "`-unet`: the same on a U-Net body (`diathermy.surrogates.unet`) instead of the "
+        "paper's pooled layout.",
         "",
         "| scene | predictor | steps | max | mean | median s |",
         "|---|---|---:|---:|---:|---:|",
@@ -421,11 +506,11 @@ def write_report(out: Path, meta: dict, summary: list[dict], rows: list[dict]) -
         )
     lines += ["", "Training history (loss of the normalised output and its differences):", ""]
     lines += ["| model | epoch | train | validation |", "|---|---:|---:|---:|"]
-    for model in ("direct", "incremental"):
-        for h in meta[f"history_{model}"]:
+    for model, history in meta["history"].items():
+        for h in history:
             lines.append(f"| {model} | {h['epoch']} | {h['train']:.4g} | {h['val']:.4g} |")
     lines += ["", "Per step (error %):", ""]
-    keys = [f"{n}{s}" for n in PREDICTORS for s in ("", "+patch")]
+    keys = [f"{n}{s}" for n in meta["predictors"] for s in ("", "+patch")]
     lines += ["| scene | step | p max MPa | removed | " + " | ".join(keys) + " |"]
     lines += ["|---|---:|---:|---:|" + "---:|" * len(keys)]
     for r in rows:
@@ -440,6 +525,14 @@ def write_report(out: Path, meta: dict, summary: list[dict], rows: list[dict]) -
     out.write_text("\n".join(lines) + "\n")
 
 
+def device_name(device: str) -> str:
+    import torch
+
+    if device.startswith("cuda"):
+        return f"{torch.cuda.get_device_name(torch.device(device))} (torch {torch.__version__})"
+    return f"the CPU (torch {torch.__version__})"
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--train-runs", type=int, default=8)
@@ -450,12 +543,24 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--lr", type=float, default=1e-3)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--threads", type=int, default=1, help="torch threads for the training")
+    ap.add_argument("--jobs", type=int, default=1, help="FEM runs at once (processes)")
+    ap.add_argument("--device", default="auto", help="torch device of the networks (auto: "
+                    "the GPU when there is one)")  # fmt: skip
+    ap.add_argument("--archs", nargs="+", choices=list(ARCHS), default=["pooled"],
+                    help="the networks' bodies: each trains a direct and an incremental network")  # fmt: skip
+    ap.add_argument("--data-only", action="store_true",
+                    help="generate (or find) the training data in --work and stop")  # fmt: skip
     ap.add_argument("--work", type=Path, default=Path("runs/incremental_network"))
     ap.add_argument("--out", type=Path, default=RESULTS / "incremental_network.md")
     args = ap.parse_args(argv)
-    if args.train_runs < 3 or args.steps < 4 or args.epochs < 1 or args.width < 1:
-        ap.error("need --train-runs >= 3, --steps >= 4, --epochs >= 1, --width >= 1")
+    if args.train_runs < 3 or args.steps < 4 or args.epochs < 1 or args.width < 1 or args.jobs < 1:
+        ap.error("need --train-runs >= 3, --steps >= 4, --epochs >= 1, --width >= 1, --jobs >= 1")
     import torch
+
+    if args.device == "auto":
+        args.device = "cuda" if torch.cuda.is_available() else "cpu"
+    if args.device.startswith("cuda") and not torch.cuda.is_available():
+        ap.error(f"--device {args.device}: CUDA is not available")
 
     from diathermy.runtime import configure_threads
 
@@ -470,35 +575,59 @@ def main(argv: list[str] | None = None) -> int:
     base = base_scene()
     variants = training_variants(args.train_runs, args.steps, args.seed)
     data, n_train = training_data(base, variants, args, log)
+    if args.data_only:
+        log(f"training data in {args.work / 'data.npz'}: {len(data['p'])} samples")
+        return 0
     n_val = len(data["p"]) - n_train
-    t0 = time.perf_counter()
-    direct, hist_d = train_direct(data, n_train, args, log)
-    t1 = time.perf_counter()
-    inc, hist_i = train_incremental(data, n_train, args, log)
-    t2 = time.perf_counter()
-    for name, m in (("direct", direct), ("incremental", inc)):
-        torch.save({"constructor_args": m.constructor_args(), "state": m.state_dict()},
-                   args.work / f"{name}.pt")  # fmt: skip
-    direct.eval()
-    inc.eval()
+    nets: dict[str, tuple[Any, Any]] = {}
+    history: dict[str, list[dict[str, float]]] = {}
+    minutes: dict[str, float] = {}
+    for arch in args.archs:
+        sfx = ARCHS[arch]
+        pair = []
+        for kind, fit in (("direct", train_direct), ("incremental", train_incremental)):
+            t0 = time.perf_counter()
+            log(f"training {kind}{sfx}")
+            model, history[f"{kind}{sfx}"] = fit(data, n_train, args, log, arch)
+            minutes[f"{kind}{sfx}"] = (time.perf_counter() - t0) / 60
+            torch.save({"constructor_args": model.constructor_args(), "state": model.state_dict()},
+                       args.work / f"{kind}{sfx}.pt")  # fmt: skip
+            pair.append(model.eval())
+        nets[sfx] = (pair[0], pair[1])
     rows = []
-    for v in HELD_OUT:
-        rows += score_held_out(base, v, args.steps, direct, inc)
-        log(f"held out {v.name}: {sum(r['scene'] == v.name for r in rows)} steps")
-    summary = summarise(rows)
+    if args.jobs > 1:  # each held-out run in a process of its own, the networks read back
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        del nets
+        files = {ARCHS[a]: (args.work / f"direct{ARCHS[a]}.pt", args.work / f"incremental{ARCHS[a]}.pt")
+                 for a in args.archs}  # fmt: skip
+        ctx = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(min(args.jobs, len(HELD_OUT)), mp_context=ctx) as pool:
+            jobs = [(base, v, args.steps, files, args.device) for v in HELD_OUT]
+            for v, got in zip(HELD_OUT, pool.map(score_from_files, jobs), strict=True):
+                rows += got
+                log(f"held out {v.name}: {len(got)} steps")
+    else:
+        for v in HELD_OUT:
+            rows += score_held_out(base, v, args.steps, nets)
+            log(f"held out {v.name}: {sum(r['scene'] == v.name for r in rows)} steps")
+    names = predictors(args.archs)
+    summary = summarise(rows, names)
     grid = "x".join(str(n) for n in data["p"].shape[1:])
     meta = {
         "command": "python benchmarks/incremental_network.py "
         f"--train-runs {args.train_runs} --steps {args.steps} --epochs {args.epochs} "
-        f"--width {args.width}",
-        "machine": f"{platform.machine()}, 2 shared cores, torch on {args.threads} thread(s)",
+        f"--width {args.width} --batch {args.batch} --jobs {args.jobs} "
+        f"--archs {' '.join(args.archs)}",
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores, FEM runs {args.jobs} at "
+        f"once, networks on {device_name(args.device)}, torch on {args.threads} thread(s)",
         "started": started,
         "minutes": (time.perf_counter() - t_start) / 60,
         "grid": grid, "train_runs": args.train_runs, "steps": args.steps,
         "n_train": n_train, "n_val": n_val, "width": args.width,
-        "epochs": args.epochs, "batch": args.batch, "lr": args.lr,
-        "train_min_direct": (t1 - t0) / 60, "train_min_incremental": (t2 - t1) / 60,
-        "history_direct": hist_d, "history_incremental": hist_i,
+        "epochs": args.epochs, "batch": args.batch, "lr": args.lr, "archs": args.archs,
+        "predictors": names, "train_minutes": minutes, "history": history,
         "variants": [v.__dict__ for v in variants],
     }  # fmt: skip
     args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -3,7 +3,7 @@ every predictor scored alone and with the patch on both held-out runs, and the r
 
 from __future__ import annotations
 
-import importlib.util
+import importlib
 import json
 import math
 import sys
@@ -13,35 +13,43 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def _load_benchmark():  # noqa: ANN202 (a module)
-    spec = importlib.util.spec_from_file_location(
-        "incremental_bench", ROOT / "benchmarks/incremental_network.py"
-    )
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # its dataclasses look their module up there
-    spec.loader.exec_module(module)
-    return module
+    """The benchmark imported by its own name from benchmarks/ (on sys.path, which spawned
+    processes inherit): its process pools pickle their tasks by that module's name."""
+    path = str(ROOT / "benchmarks")
+    if path not in sys.path:
+        sys.path.insert(0, path)
+    return importlib.import_module("incremental_network")
 
 
 def test_incremental_network_benchmark_runs_tiny(tmp_path: Path) -> None:
+    """The data in processes of their own (--data-only), read back by the run that trains both
+    architectures and scores the held-out runs in processes of their own."""
     bench = _load_benchmark()
     out = tmp_path / "inc.md"
-    argv = ["--train-runs", "3", "--steps", "5", "--epochs", "1", "--width", "2"]
-    assert bench.main([*argv, "--work", str(tmp_path / "w"), "--out", str(out)]) == 0
+    argv = ["--train-runs", "3", "--steps", "5", "--epochs", "1", "--width", "2", "--jobs", "2"]
+    argv += ["--work", str(tmp_path / "w")]
+    assert bench.main([*argv, "--data-only", "--out", str(out)]) == 0
+    assert (tmp_path / "w" / "data.npz").exists() and not out.exists()
+    assert bench.main([*argv, "--archs", "pooled", "unet", "--out", str(out)]) == 0
     data = json.loads(out.with_suffix(".json").read_text())
     scenes = {v.name for v in bench.HELD_OUT}
+    names = bench.predictors(["pooled", "unet"])
+    assert names[:4] == list(bench.PREDICTORS) and "chained-unet" in names
     assert {r["scene"] for r in data["rows"]} == scenes
     for r in data["rows"]:
-        for name in bench.PREDICTORS:
+        for name in names:
             for key in (name, f"{name}+patch"):
                 assert math.isfinite(r[f"{key}_error"]) and r[f"{key}_s"] >= 0.0, (r, key)
         # the first mechanics step: persistence has nothing (u_prev = 0), so it misses wholly
         if r is data["rows"][0]:
             assert r["previous_error"] == 1.0
-    assert len(data["summary"]) == 2 * len(scenes) * len(bench.PREDICTORS)
+    assert len(data["summary"]) == 2 * len(scenes) * len(names)
+    assert set(data["meta"]["history"]) == {"direct", "incremental", "direct-unet",
+                                            "incremental-unet"}  # fmt: skip
     text = out.read_text()
-    assert "| default | incremental+patch |" in text and "Training history" in text
-    assert (tmp_path / "w" / "incremental.pt").exists()
+    assert "| default | incremental-unet+patch |" in text and "Training history" in text
+    for name in ("incremental.pt", "direct-unet.pt"):
+        assert (tmp_path / "w" / name).exists()
 
 
 def test_bad_arguments_are_one_line_errors(capsys) -> None:  # noqa: ANN001
