@@ -45,10 +45,34 @@ def test_train_holds_out_the_named_scenarios_and_fine_tunes(
     assert masked.model.config.mask_input and masked.training_config["mask_input"]
 
 
+def test_train_a_unet_and_fine_tune_it(tiny_dataset: Path, tmp_path: Path) -> None:
+    """--arch unet trains a U-Net (checkpoint version 3); a fine-tune keeps its arch, and one
+    that asks for another arch or a wider U-Net is a one-line refusal."""
+    out, tuned = tmp_path / "unet.pt", tmp_path / "tuned.pt"
+    common = ["--width", "4", "--epochs", "1", "--quiet", "--arch", "unet", "--levels", "2"]
+    assert main(["train", str(tiny_dataset), "--out", str(out), *common]) == 0
+    ckpt = load_checkpoint(out, expected_grid=(9, 9, 17))
+    assert (ckpt.model.config.arch, ckpt.model.config.levels) == ("unet", 2)
+    assert ckpt.training_config["arch"] == "unet"
+    assert main(["train", str(tiny_dataset), "--out", str(tuned), *common, "--init", str(out)]) == 0
+    assert load_checkpoint(tuned).model.config.arch == "unet"
+    pooled = ["--width", "4", "--epochs", "1", "--quiet", "--init", str(out)]
+    wider = [*common[2:], "--width", "8", "--init", str(out)]
+    for argv, message in ((pooled, "arch 'unet'"), (wider, "only the paper's layout")):
+        done = subprocess.run(
+            [sys.executable, "-m", "diathermy", "train", str(tiny_dataset), "--out",
+             str(tmp_path / "bad.pt"), *argv],
+            capture_output=True, text=True, timeout=120,
+        )  # fmt: skip
+        assert done.returncode != 0 and message in done.stderr, done.stderr
+        assert "Traceback" not in done.stderr
+
+
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
         (["train", "missing.h5", "--out", "m.pt"], "does not exist"),
+        (["train", "DATA", "--out", "m.pt", "--arch", "unet", "--levels", "9"], "levels"),
         (["train", "DATA", "--out", "m.pt", "--width", "0"], "positive integer"),
         (["train", "DATA", "--out", "m.pt", "--val-fraction", "1.5"], "fraction"),
         (["train", "DATA", "--out", "m.pt", "--amp", "fp16", "--device", "cpu"], "fp16"),

@@ -84,6 +84,8 @@ def train_config_from_args(args: argparse.Namespace) -> TrainConfig:
         energy_weight=args.energy_weight,
         scale_samples=args.scale_samples,
         mask_input=args.mask_input,
+        arch=args.arch,
+        levels=args.levels,
     )
 
 
@@ -244,6 +246,15 @@ def add_train_parser(subparsers: Any) -> None:
         "--mask-input", action="store_true",
         help="also feed the tissue mask phi > 0 as an input channel; with --init from a model "
         "without it, the new channel starts at zero weight (the parent's predictions)",
+    )  # fmt: skip
+    s.add_argument(
+        "--arch", choices=["pooled", "unet"], default="pooled",
+        help="the network's body: pooled, the paper's (a full-resolution trunk and branches "
+        "pooled by 2 and 4), or unet, a U-Net whose levels halve the grid and see it whole",
+    )  # fmt: skip
+    s.add_argument(
+        "--levels", type=_positive_int, default=4,
+        help="the U-Net's levels, 1-6 (4 spans 16 cells per axis at the bottom)",
     )  # fmt: skip
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_train)

@@ -46,6 +46,8 @@ class TrainConfig:
     lr_schedule: str = "constant"  # "constant", or "cosine": lr decays to lr/100 over the epochs
     energy_weight: float = 0.0  # weight of the squared relative strain-energy error (eq. 20/21)
     mask_input: bool = False  # the tissue mask phi > 0 as a third input channel
+    arch: str = "pooled"  # the network's body: "pooled" (the paper's) or "unet"
+    levels: int = 4  # the U-Net's levels (arch "unet")
 
     def __post_init__(self) -> None:
         checks = {
@@ -67,7 +69,20 @@ class TrainConfig:
             raise CheckpointError(
                 f"lr_schedule must be one of {list(LR_SCHEDULES)}, got {self.lr_schedule!r}"
             )
-        CNNConfig(width=self.width, depth=self.depth, mask_input=self.mask_input)
+        try:
+            self.model_config()
+        except ValueError as err:
+            raise CheckpointError(f"training option arch/levels is invalid: {err}") from None
+
+    def model_config(self) -> CNNConfig:
+        """The network these options build."""
+        return CNNConfig(
+            width=self.width,
+            depth=self.depth,
+            mask_input=self.mask_input,
+            arch=self.arch,
+            levels=self.levels,
+        )
 
 
 @dataclass(frozen=True)

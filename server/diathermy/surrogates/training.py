@@ -27,7 +27,7 @@ from tqdm import tqdm
 from diathermy.errors import CheckpointError
 from diathermy.physics.strain_energy_error import dataset_tissue
 from diathermy.surrogates.checkpoint import LoadedCheckpoint, load_checkpoint, save_checkpoint
-from diathermy.surrogates.cnn import CNNConfig, DisplacementCNN
+from diathermy.surrogates.cnn import DisplacementCNN
 from diathermy.surrogates.data import (
     DatasetInfo,
     FieldDataset,
@@ -131,6 +131,18 @@ def _start_state(
     if init_from is not None:
         parent = load_checkpoint(init_from, expected_grid=info.grid_shape)
         model = parent.model
+        if (model.config.arch, model.config.levels) != (config.arch, config.levels):
+            raise CheckpointError(
+                f"{str(init_from)!r} has arch {model.config.arch!r} with {model.config.levels} "
+                f"levels, the run asks for {config.arch!r} with {config.levels} (they must match)"
+            )
+        if model.config.arch != "pooled" and (
+            config.width != model.config.width or config.mask_input != model.config.mask_input
+        ):
+            raise CheckpointError(
+                f"{str(init_from)!r} is a {model.config.arch}: only the paper's layout can be "
+                "widened or given the mask channel; fine-tune it at its own width and inputs"
+            )
         arch = (model.config.width, model.config.depth)
         if model.config.depth != config.depth or model.config.width > config.width:
             raise CheckpointError(
@@ -158,7 +170,7 @@ def _start_state(
     p0 = info.p0_pa
     torch.manual_seed(config.seed)
     model = DisplacementCNN(
-        CNNConfig(width=config.width, depth=config.depth, mask_input=config.mask_input),
+        config.model_config(),
         fit_scales(p, phi, u, p0_pa=p0, per_sample_amplitude=config.per_sample_amplitude),
     )
     return _Start(model, None, None), split
