@@ -45,7 +45,7 @@ def test_torchrun_command_passes_every_option(tmp_path) -> None:
         width=4, depth=3, epochs=3, batch_size=2, lr=0.01, val_fraction=0.3, patience=5,
         seed=9, amp="bf16", device="cpu", num_workers=1, scale_samples=17,
         per_sample_amplitude=False, strain_weight=0.25, lr_schedule="cosine", energy_weight=0.5,
-        mask_input=True,
+        mask_input=True, arch="unet", levels=3,
     )  # fmt: skip
     defaults = TrainConfig()
     assert all(getattr(config, f.name) != getattr(defaults, f.name) for f in fields(TrainConfig))

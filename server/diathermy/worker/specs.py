@@ -95,6 +95,8 @@ class TrainOptions(_Spec):
     lr_schedule: Literal["constant", "cosine"] = "constant"
     energy_weight: Annotated[float, Field(ge=0, le=1e3, allow_inf_nan=False)] = 0.0
     mask_input: bool = False
+    arch: Literal["pooled", "unet"] = "pooled"
+    levels: Annotated[int, Field(ge=1, le=6)] = 4
 
 
 class TrainingJobSpec(_Spec):

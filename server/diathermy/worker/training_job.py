@@ -43,6 +43,7 @@ def torchrun_command(
         "--strain-weight", repr(config.strain_weight), "--lr-schedule", config.lr_schedule,
         "--scale-samples", str(config.scale_samples),
         "--energy-weight", repr(config.energy_weight),
+        "--arch", config.arch, "--levels", str(config.levels),
         "--quiet",
     ]  # fmt: skip
     if not config.per_sample_amplitude:
