@@ -52,12 +52,11 @@ def fem_of(backend: MechanicsBackend | None) -> FEMBackend | None:
 def auto_network(
     ctx: EngineContext, models: ModelResolver | None
 ) -> tuple[DisplacementPredictor | None, str | None]:
-    """The network 'auto' may ask, or None and why not (a graded grid, no model for the grid,
-    a model that does not load): 'auto' then runs on persistence, never fails mid-run."""
+    """The network 'auto' may ask, or None and why not (no model for the grid, a model trained
+    for another grid, one that does not load): 'auto' then runs on persistence, never fails
+    mid-run. A graded grid takes a model trained on its own node coordinates."""
     grid = ctx.disc.grid
     shape = "x".join(str(n) for n in grid.shape)
-    if not grid.is_uniform:
-        return None, f"no network for the graded grid {shape}: persistence"
     model = ctx.scene.mechanics.model
     try:
         # torch loads only here: an engine without a network never imports it
@@ -124,10 +123,15 @@ def make_backend(
         )
     if cfg.backend in ("cnn", "pgd") and not ctx.disc.grid.is_uniform:
         shape = "x".join(str(n) for n in ctx.disc.grid.shape)
+        hint = (
+            "mechanics.predictor 'auto' with a network trained for this grid"
+            if cfg.backend == "cnn"
+            else "drop scene.resolution"
+        )
         raise SceneError(
-            f"mechanics.model: no {cfg.backend.upper()} model for this grid: the scene's grid is "
-            f"graded ({shape} nodes, scene.resolution) and the surrogates are trained on uniform "
-            "grids only; use mechanics.backend 'fem' or drop scene.resolution"
+            f"mechanics.backend: '{cfg.backend}' runs on uniform grids only and the scene's grid "
+            f"is graded ({shape} nodes, scene.resolution); use mechanics.backend 'fem' (with "
+            f"{hint})"
         )
     if cfg.backend == "cnn":
         # torch loads only here: an FEM-only engine never imports it

@@ -38,7 +38,7 @@ from diathermy.physics.equilibrium_guard import (
 from diathermy.physics.mechanics import MechanicsSolver
 from diathermy.physics.mechanics_backend import FEMBackend, MechanicsOutput
 from diathermy.physics.patch_correction import node_graph, patch_correct, residual_patch
-from diathermy.surrogates.checkpoint import load_checkpoint
+from diathermy.surrogates.checkpoint import grid_mismatch, load_checkpoint
 from diathermy.surrogates.inference import default_device
 
 MODELS_PACKAGE = "diathermy.surrogates.models"
@@ -122,11 +122,9 @@ class CNNBackend:
         self.device = torch.device(device) if device is not None else default_device()
         grid = mesh.grid
         ckpt = load_checkpoint(self.model_path, expected_grid=grid.shape, map_location=self.device)
-        if not np.allclose(ckpt.spacing_m, grid.spacing_m, rtol=1e-6, atol=0.0):
-            raise CheckpointError(
-                f"model {str(self.model_path)!r} was trained for node spacing {ckpt.spacing_m} m, "
-                f"the scene's grid has {grid.spacing_m} m (another block size)"
-            )
+        mismatch = grid_mismatch(ckpt, grid, str(self.model_path))
+        if mismatch is not None:
+            raise CheckpointError(mismatch)
         self.model = ckpt.model.eval()
         self.metrics = ckpt.metrics
         self.poisson_ratio = float(poisson_ratio)

@@ -7,13 +7,16 @@ with ``torch.load(weights_only=True)`` (no arbitrary code runs on load).
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 
 from diathermy.errors import CheckpointError
+from diathermy.mesh.grid import Grid
 from diathermy.surrogates.cnn import DisplacementCNN
 from diathermy.version import __version__
 
@@ -38,6 +41,8 @@ class LoadedCheckpoint:
     model: DisplacementCNN
     grid_shape: tuple[int, int, int]
     spacing_m: tuple[float, float, float]
+    # node coordinates (x, y, z) in m of the graded grid the model was trained on; None: uniform
+    axes_m: tuple[tuple[float, ...], ...] | None = None
     training_config: dict[str, Any] = field(default_factory=dict)
     metrics: dict[str, Any] = field(default_factory=dict)
     data: dict[str, Any] = field(default_factory=dict)
@@ -61,8 +66,11 @@ def save_checkpoint(
     metrics: dict[str, Any] | None = None,
     data: dict[str, Any] | None = None,
     training_state: dict[str, Any] | None = None,
+    axes_m: Sequence[Sequence[float]] | None = None,
 ) -> None:
-    """Write ``model`` (on any device) atomically to ``path``; grid (nz, ny, nx), spacing (dx, dy, dz) m."""
+    """Write ``model`` (on any device) atomically to ``path``; grid (nz, ny, nx), spacing (dx, dy,
+    dz) m; ``axes_m``: the node coordinates (x, y, z) in m of a graded grid (its smallest cells
+    as ``spacing_m``), which the model then applies to alone."""
     payload: dict[str, Any] = {
         "format": FORMAT_NAME,
         "format_version": format_version(model),
@@ -78,6 +86,12 @@ def save_checkpoint(
     }
     if training_state is not None:
         payload["training_state"] = training_state
+    if axes_m is not None:
+        axes = [[float(v) for v in a] for a in axes_m]
+        expected = [int(n) for n in grid_shape][::-1]  # (nx, ny, nz)
+        if [len(a) for a in axes] != expected:
+            raise CheckpointError(f"axes_m has {[len(a) for a in axes]} nodes, the grid {expected}")
+        payload["axes_m"] = axes
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
@@ -146,4 +160,41 @@ def load_checkpoint(
         metrics=dict(payload.get("metrics") or {}),
         data=dict(payload.get("data") or {}),
         training_state=payload.get("training_state"),
+        axes_m=_axes(path, payload.get("axes_m"), grid),
     )
+
+
+def _axes(path: Path, raw: Any, grid: tuple[int, int, int]) -> tuple[tuple[float, ...], ...] | None:
+    if raw is None:
+        return None
+    try:
+        axes = tuple(tuple(float(v) for v in a) for a in raw)
+    except (TypeError, ValueError):
+        raise CheckpointError(f"{str(path)!r} is a corrupt checkpoint: axes_m") from None
+    if [len(a) for a in axes] != list(grid[::-1]):
+        raise CheckpointError(
+            f"{str(path)!r} is a corrupt checkpoint: axes_m does not fit its grid"
+        )
+    return axes
+
+
+def grid_mismatch(ckpt: LoadedCheckpoint, grid: Grid, name: str) -> str | None:
+    """Why the model of ``ckpt`` (file ``name``) does not apply to ``grid`` (same node counts
+    already checked), or None when it does: a uniform model needs the grid's spacing, a graded
+    one the grid's node coordinates (to 1 um)."""
+    if ckpt.axes_m is None:
+        if not grid.is_uniform:
+            return f"model {name!r} was trained for a uniform grid, the scene's grid is graded"
+        if not np.allclose(ckpt.spacing_m, grid.spacing_m, rtol=1e-6, atol=0.0):
+            return (
+                f"model {name!r} was trained for node spacing {ckpt.spacing_m} m, the scene's "
+                f"grid has {grid.spacing_m} m (another block size)"
+            )
+        return None
+    for axis, trained, here in zip("xyz", ckpt.axes_m, grid.axes(), strict=True):
+        if not np.allclose(trained, here, rtol=0.0, atol=1e-6):
+            return (
+                f"model {name!r} was trained for other {axis} node coordinates (a graded grid of "
+                "another block, working region or resolution)"
+            )
+    return None

@@ -13,7 +13,7 @@ import torch
 from diathermy.errors import CheckpointError
 from diathermy.mesh import TetMesh
 from diathermy.physics.mechanics import clamped_bottom
-from diathermy.surrogates.checkpoint import load_checkpoint
+from diathermy.surrogates.checkpoint import grid_mismatch, load_checkpoint
 from diathermy.surrogates.inference import default_device, predict
 
 
@@ -34,11 +34,9 @@ class CNNPredictor:
         dev = torch.device(device) if device is not None else default_device()
         grid = mesh.grid
         ckpt = load_checkpoint(self.model_path, expected_grid=grid.shape, map_location=dev)
-        if not np.allclose(ckpt.spacing_m, grid.spacing_m, rtol=1e-6, atol=0.0):
-            raise CheckpointError(
-                f"model {str(self.model_path)!r} was trained for node spacing {ckpt.spacing_m} m, "
-                f"the scene's grid has {grid.spacing_m} m (another block size)"
-            )
+        mismatch = grid_mismatch(ckpt, grid, str(self.model_path))
+        if mismatch is not None:
+            raise CheckpointError(mismatch)
         self.model = ckpt.model.eval().to(dev)
         self.shape = grid.shape
         self._fixed = clamped_bottom(mesh).mask(3 * mesh.n_nodes).reshape(-1, 3)
