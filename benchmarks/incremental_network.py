@@ -525,6 +525,44 @@ def write_report(out: Path, meta: dict, summary: list[dict], rows: list[dict]) -
     out.write_text("\n".join(lines) + "\n")
 
 
+def model_checkpoint(
+    args: Any, base: Any, arch: str, summary: list[dict], rows: list[dict]
+) -> Path:
+    """The trained direct network of ``arch`` as a checkpoint for the scene's graded grid
+    (``--work``/cnn_<nz>x<ny>x<nx>[-unet].pt, its node coordinates in it, so the engine's
+    ``mechanics.predictor: auto`` can ask it there), with its held-out errors against
+    persistence as metrics: over every step and on the first mechanics step of each held-out
+    run, where 'auto' asks it."""
+    import torch
+
+    from diathermy.surrogates.checkpoint import save_checkpoint
+    from diathermy.surrogates.cnn import DisplacementCNN
+
+    sfx = ARCHS[arch]
+    saved = torch.load(args.work / f"direct{sfx}.pt", map_location="cpu", weights_only=True)
+    model = DisplacementCNN.from_constructor_args(saved["constructor_args"])
+    model.load_state_dict(saved["state"])
+    grid = base.node_grid()
+    first = {}
+    for scene in dict.fromkeys(r["scene"] for r in rows):
+        r = next(r for r in rows if r["scene"] == scene)
+        first[scene] = {k: r[f"{k}_error"] for k in ("previous", "previous+patch",
+                                                     f"direct{sfx}", f"direct{sfx}+patch")}  # fmt: skip
+    held_out = [s for s in summary if s["predictor"].startswith(("previous", f"direct{sfx}"))]
+    shape = "x".join(map(str, grid.shape))
+    path = args.work / f"cnn_{shape}{sfx}.pt"
+    save_checkpoint(
+        path, model, grid_shape=grid.shape, spacing_m=grid.min_spacing_m, axes_m=grid.axes(),
+        training_config={"benchmark": "incremental_network.py", "arch": arch,
+                         "width": args.width, "epochs": args.epochs, "batch": args.batch,
+                         "lr": args.lr, "seed": args.seed},
+        metrics={"held_out": held_out, "first_mechanics_step": first},
+        data={"train_runs": args.train_runs, "steps": args.steps, "scene": "default",
+              "held_out_scenes": [v.name for v in HELD_OUT]},
+    )  # fmt: skip
+    return path
+
+
 def device_name(device: str) -> str:
     import torch
 
@@ -615,6 +653,9 @@ def main(argv: list[str] | None = None) -> int:
     names = predictors(args.archs)
     summary = summarise(rows, names)
     grid = "x".join(str(n) for n in data["p"].shape[1:])
+    for arch in args.archs:
+        path = model_checkpoint(args, base, arch, summary, rows)
+        log(f"the direct{ARCHS[arch]} network as a model for the engine's grid: {path}")
     meta = {
         "command": "python benchmarks/incremental_network.py "
         f"--train-runs {args.train_runs} --steps {args.steps} --epochs {args.epochs} "

@@ -50,6 +50,16 @@ def test_incremental_network_benchmark_runs_tiny(tmp_path: Path) -> None:
     assert "| default | incremental-unet+patch |" in text and "Training history" in text
     for name in ("incremental.pt", "direct-unet.pt"):
         assert (tmp_path / "w" / name).exists()
+    # the direct networks as models for the engine's graded grid, errors against persistence in
+    from diathermy.surrogates.checkpoint import grid_mismatch, load_checkpoint
+
+    grid = bench.base_scene().node_grid()
+    for sfx in ("", "-unet"):
+        path = tmp_path / "w" / f"cnn_24x32x48{sfx}.pt"
+        ckpt = load_checkpoint(path, expected_grid=grid.shape)
+        assert grid_mismatch(ckpt, grid, path.name) is None
+        first = ckpt.metrics["first_mechanics_step"]["default"]
+        assert first["previous"] == 1.0 and math.isfinite(first[f"direct{sfx}+patch"])
 
 
 def test_bad_arguments_are_one_line_errors(capsys) -> None:  # noqa: ANN001
