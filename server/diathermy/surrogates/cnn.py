@@ -18,11 +18,10 @@ from torch import nn
 
 from diathermy.surrogates.layers import ConvAct, PooledBranch, conv3d_same
 from diathermy.surrogates.normalization import FieldNormalizer, FieldScales
-from diathermy.surrogates.unet import UNet3D
+from diathermy.surrogates.unet import UNet3D, check_arch
 
 IN_CHANNELS = 2  # (p - p0) / p_scale, phi / phi_scale
 OUT_CHANNELS = 3  # u_x, u_y, u_z / u_scale
-ARCHS = ("pooled", "unet")
 
 
 @dataclass(frozen=True)
@@ -42,10 +41,7 @@ class CNNConfig:
     levels: int = 4
 
     def __post_init__(self) -> None:
-        if self.arch not in ARCHS:
-            raise ValueError(f"arch must be one of {ARCHS}, got {self.arch!r}")
-        if not 1 <= self.levels <= 6:
-            raise ValueError(f"levels must lie in 1..6, got {self.levels}")
+        check_arch(self.arch, self.levels)
         if self.width < 1:
             raise ValueError(f"width must be >= 1, got {self.width}")
         if self.depth < 1:

@@ -29,11 +29,10 @@ import torch
 from torch import nn
 
 from diathermy.surrogates.layers import ConvAct, PooledBranch, conv3d_same
-from diathermy.surrogates.unet import UNet3D
+from diathermy.surrogates.unet import UNet3D, check_arch
 
 IN_CHANNELS = 7
 OUT_CHANNELS = 3
-ARCHS = ("pooled", "unet")
 
 
 @dataclass(frozen=True)
@@ -60,10 +59,7 @@ class IncrementalConfig:
     def __post_init__(self) -> None:
         if self.width < 1 or self.depth < 1:
             raise ValueError(f"width and depth must be >= 1, got {self.width}, {self.depth}")
-        if self.arch not in ARCHS:
-            raise ValueError(f"arch must be one of {ARCHS}, got {self.arch!r}")
-        if not 1 <= self.levels <= 6:
-            raise ValueError(f"levels must lie in 1..6, got {self.levels}")
+        check_arch(self.arch, self.levels)
         if any(int(k) < 2 for k in self.pools):
             raise ValueError(f"pools must be factors >= 2, got {self.pools}")
         for name in ("level_set_scale_m", "gain_m_per_pa", "change_gain_m_per_pa"):

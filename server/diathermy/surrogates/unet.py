@@ -15,6 +15,17 @@ from torch.nn import functional as F
 
 from diathermy.surrogates.layers import ConvAct
 
+ARCHS = ("pooled", "unet")
+"""The networks' bodies: the paper's pooled layout, or this U-Net."""
+
+
+def check_arch(arch: str, levels: int) -> None:
+    """ValueError unless ``arch`` is one of ``ARCHS`` and ``levels`` lies in 1..6."""
+    if arch not in ARCHS:
+        raise ValueError(f"arch must be one of {ARCHS}, got {arch!r}")
+    if not 1 <= levels <= 6:
+        raise ValueError(f"levels must lie in 1..6, got {levels}")
+
 
 class ConvBlock(nn.Module):
     """Two 3^3 convolutions with leaky ReLUs: (N, C_in, D, H, W) -> (N, C_out, D, H, W)."""
@@ -33,7 +44,8 @@ class UNet3D(nn.Module):
 
     Level k has ``width * 2**k`` channels (capped at 8x ``width``); pooling is a 2^3 average with
     ``ceil_mode``, upsampling trilinear to the skip's exact size, then concatenation and a
-    ``ConvBlock``.
+    ``ConvBlock``. The coarse levels hold most weights: at width 12 and 4 levels about 2.1 M,
+    against 25 k in the paper's layout of that width (a checkpoint of ~8 MB).
     """
 
     def __init__(self, in_channels: int, width: int, levels: int, negative_slope: float) -> None:
