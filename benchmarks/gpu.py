@@ -1,7 +1,8 @@
 """The networks on the GPU against the CPU (issue #22, item 5): inference and a whole step.
 
-    python benchmarks/gpu.py [--grids default 33x33x65 64x64x128] [--repeat 20] [--steps 6]
-                             [--warmup-steps 80] [--out benchmarks/results/gpu.md]
+    python benchmarks/gpu.py [--grids default 33x33x65 64x64x128] [--step-grids ...]
+                             [--modes full incremental hybrid auto] [--repeat 20] [--steps 6]
+                             [--warmup-steps 80] [--warmup-s 120] [--out benchmarks/results/gpu.md]
 
 Run it on a machine with CUDA (the device tool's, when one is lent): every measurement runs on
 the CPU and, where ``torch.cuda.is_available()``, on the GPU, in the same run. Without CUDA it
@@ -296,8 +297,10 @@ def run_steps(info: dict[str, Any], steps: int) -> dict[str, Any]:
 
     from diathermy.physics.strain_energy import relative_strain_energy_error
 
-    networks = ["hybrid", "auto"] if "model" in info else []
-    modes = networks if torch.cuda.is_available() else ["full", "incremental", *networks]
+    chosen = info.get("modes", list(STEP_MODES))
+    networks = [m for m in ("hybrid", "auto") if m in chosen and "model" in info]
+    plain = [m for m in ("full", "incremental") if m in chosen]
+    modes = networks if torch.cuda.is_available() else [*plain, *networks]
     if not modes:
         return {"device": "cuda", "gpu": torch.cuda.get_device_name(), "modes": {}}
     sims = {}
@@ -333,6 +336,7 @@ def run_steps(info: dict[str, Any], steps: int) -> dict[str, Any]:
 
 def whole_steps(
     grids: list[tuple[int, int, int] | None],
+    modes: list[str],
     steps: int,
     warmup: int,
     warmup_s: float,
@@ -346,6 +350,7 @@ def whole_steps(
     out: list[dict[str, Any]] = []
     for grid in grids:
         info = warm(grid, work, warmup, warmup_s)
+        info["modes"] = modes
         print(f"  {info['grid']}: warmed up in {info['warmup_s']:.0f} s", flush=True)
         cuda = torch.cuda.is_available()
         children = {}
@@ -463,6 +468,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="grids of the whole-step part (default: --grids; none: skip it)")  # fmt: skip
     ap.add_argument("--repeat", type=int, default=20)
     ap.add_argument("--steps", type=int, default=6, help="lockstep steps per mode")
+    ap.add_argument("--modes", nargs="+", choices=list(STEP_MODES), default=list(STEP_MODES),
+                    help="the whole-step modes (without full: no errors, a cheaper run on "
+                    "large grids)")  # fmt: skip
     ap.add_argument("--warmup-steps", type=int, default=80, help="cap of the warm-up")
     ap.add_argument("--warmup-s", type=float, default=120.0,
                     help="the warm-up stops after this long once the mechanics has run")  # fmt: skip
@@ -505,7 +513,7 @@ def main(argv: list[str] | None = None) -> int:
         print("whole steps", flush=True)
         for_each = partial(report, inf)
         if step_grids:
-            whole_steps(step_grids, a.steps, a.warmup_steps, a.warmup_s, work, for_each)
+            whole_steps(step_grids, a.modes, a.steps, a.warmup_steps, a.warmup_s, work, for_each)
     print(f"wrote {a.out}", flush=True)
     return 0
 

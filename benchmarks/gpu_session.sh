@@ -13,7 +13,8 @@
 # STEP_GRIDS change the runs' size (a dry run: STEPS=5 EPOCHS=1 GRIDS="default 17x17x33").
 # A whole step at 64x64x128 does not fit the default limits (2026-12-04 on an H200 machine: its
 # warm-up alone took 80 s, and four engines stepping in lockstep, the full solve among them, did
-# not finish in 160-220 s more): give it a run of its own, STEP_GRIDS=64x64x128 GPU_TIMEOUT=500.
+# not finish in 160-220 s more): give it a run of its own, e.g. `python3 benchmarks/gpu.py
+# --grids 64x64x128 --modes incremental hybrid auto --steps 3` (without the full solve: no errors).
 set -uo pipefail
 out=${1:?usage: bash benchmarks/gpu_session.sh OUTDIR [TRAIN_RUNS]}
 runs=${2:-22}
