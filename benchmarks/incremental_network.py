@@ -2,11 +2,12 @@
 
     python benchmarks/incremental_network.py [--train-runs 8] [--steps 60] [--epochs 12]
         [--width 16] [--batch 2] [--archs pooled unet] [--jobs N] [--device auto]
-        [--data-only] [--work runs/incremental_network]
+        [--data-only] [--reuse] [--work runs/incremental_network]
 
 ``--jobs``: FEM runs at once, one process each; ``--device``: where the networks train and
 predict (auto: the GPU when there is one); ``--data-only``: generate the training data into
-``--work`` (a later run with the same runs, steps and seed reads it back) and stop.
+``--work`` (a later run with the same runs, steps and seed reads it back) and stop;
+``--reuse``: read the networks a run with the same settings already trained into ``--work``.
 
 One run, one grid: the `default` scene's graded grid (24x32x48, 1 mm under the electrode), the
 grid of the set-up's main job. Training data: FEM runs (every step solved in full) of variants of
@@ -563,6 +564,36 @@ def model_checkpoint(
     return path
 
 
+def settings_of(args: Any) -> dict[str, Any]:
+    """What else than the architecture decides a trained network: data and optimisation."""
+    keys = ("train_runs", "steps", "seed", "epochs", "batch", "lr", "width")
+    return {k: getattr(args, k) for k in keys}
+
+
+def trained_before(
+    path: Path, kind: str, arch: str, args: Any
+) -> tuple[Any, list[dict[str, float]], float] | None:
+    """``--reuse``: the network of ``path`` with its history and training minutes when it was
+    trained with this run's settings and architecture, else None (it is trained again)."""
+    import torch
+
+    from diathermy.surrogates.cnn import DisplacementCNN
+    from diathermy.surrogates.incremental import IncrementalCNN
+
+    if not path.exists():
+        return None
+    saved = torch.load(path, map_location=args.device, weights_only=True)
+    config = saved["constructor_args"]["config"]
+    if config.get("arch", "pooled") != arch or config["width"] != args.width:
+        return None
+    if saved.get("settings", settings_of(args)) != settings_of(args):
+        return None
+    cls = DisplacementCNN if kind == "direct" else IncrementalCNN
+    model = cls.from_constructor_args(saved["constructor_args"])
+    model.load_state_dict(saved["state"])
+    return model.to(args.device), list(saved.get("history", [])), float(saved.get("minutes", 0.0))
+
+
 def device_name(device: str) -> str:
     import torch
 
@@ -586,6 +617,9 @@ def main(argv: list[str] | None = None) -> int:
                     "the GPU when there is one)")  # fmt: skip
     ap.add_argument("--archs", nargs="+", choices=list(ARCHS), default=["pooled"],
                     help="the networks' bodies: each trains a direct and an incremental network")  # fmt: skip
+    ap.add_argument("--reuse", action="store_true",
+                    help="read networks already trained in --work with the same settings instead "
+                    "of training them again (a run cut off after training)")  # fmt: skip
     ap.add_argument("--data-only", action="store_true",
                     help="generate (or find) the training data in --work and stop")  # fmt: skip
     ap.add_argument("--work", type=Path, default=Path("runs/incremental_network"))
@@ -624,12 +658,19 @@ def main(argv: list[str] | None = None) -> int:
         sfx = ARCHS[arch]
         pair = []
         for kind, fit in (("direct", train_direct), ("incremental", train_incremental)):
-            t0 = time.perf_counter()
-            log(f"training {kind}{sfx}")
-            model, history[f"{kind}{sfx}"] = fit(data, n_train, args, log, arch)
-            minutes[f"{kind}{sfx}"] = (time.perf_counter() - t0) / 60
-            torch.save({"constructor_args": model.constructor_args(), "state": model.state_dict()},
-                       args.work / f"{kind}{sfx}.pt")  # fmt: skip
+            name, path = f"{kind}{sfx}", args.work / f"{kind}{sfx}.pt"
+            reused = trained_before(path, kind, arch, args) if args.reuse else None
+            if reused is not None:
+                model, history[name], minutes[name] = reused
+                log(f"{name}: trained before, read from {path}")
+            else:
+                t0 = time.perf_counter()
+                log(f"training {name}")
+                model, history[name] = fit(data, n_train, args, log, arch)
+                minutes[name] = (time.perf_counter() - t0) / 60
+                torch.save({"constructor_args": model.constructor_args(),
+                            "state": model.state_dict(), "settings": settings_of(args),
+                            "history": history[name], "minutes": minutes[name]}, path)  # fmt: skip
             pair.append(model.eval())
         nets[sfx] = (pair[0], pair[1])
     rows = []

@@ -50,6 +50,18 @@ def test_incremental_network_benchmark_runs_tiny(tmp_path: Path) -> None:
     assert "| default | incremental-unet+patch |" in text and "Training history" in text
     for name in ("incremental.pt", "direct-unet.pt"):
         assert (tmp_path / "w" / name).exists()
+    # --reuse: the networks read back with their histories, nothing trained again; another
+    # width is not the same network and would be trained anew
+    reused = tmp_path / "reused.md"
+    assert bench.main([*argv, "--archs", "unet", "--reuse", "--out", str(reused)]) == 0
+    again = json.loads(reused.with_suffix(".json").read_text())
+    assert again["meta"]["history"]["direct-unet"] == data["meta"]["history"]["direct-unet"]
+    assert again["meta"]["train_minutes"] == {
+        k: v for k, v in data["meta"]["train_minutes"].items() if k.endswith("-unet")
+    }
+    other = bench.trained_before(tmp_path / "w" / "direct-unet.pt", "direct", "unet",
+                                 bench.argparse.Namespace(**{**vars_of(argv), "width": 3}))  # fmt: skip
+    assert other is None
     # the direct networks as models for the engine's graded grid, errors against persistence in
     from diathermy.surrogates.checkpoint import grid_mismatch, load_checkpoint
 
@@ -60,6 +72,14 @@ def test_incremental_network_benchmark_runs_tiny(tmp_path: Path) -> None:
         assert grid_mismatch(ckpt, grid, path.name) is None
         first = ckpt.metrics["first_mechanics_step"]["default"]
         assert first["previous"] == 1.0 and math.isfinite(first[f"direct{sfx}+patch"])
+
+
+def vars_of(argv: list[str]) -> dict:
+    """The settings ``trained_before`` compares, as the tiny run's arguments give them."""
+    opts = dict(zip(argv[::2], argv[1::2], strict=True))
+    return {"train_runs": int(opts["--train-runs"]), "steps": int(opts["--steps"]), "seed": 0,
+            "epochs": int(opts["--epochs"]), "batch": 2, "lr": 1e-3,
+            "width": int(opts["--width"]), "device": "cpu"}  # fmt: skip
 
 
 def test_bad_arguments_are_one_line_errors(capsys) -> None:  # noqa: ANN001
