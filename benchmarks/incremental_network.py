@@ -520,6 +520,22 @@ def write_report(out: Path, meta: dict, summary: list[dict], rows: list[dict]) -
             f"| {r['scene']} | {r['step']} | {r['max_pressure_pa'] / 1e6:.2f} | "
             f"{r['removed_tets']} | {vals} |"
         )
+    lines += [
+        "",
+        "In the engine (`in_the_engine`): the default scene built and stepped with "
+        "`mechanics.predictor: previous`, and with `auto` asking each direct network written "
+        "above on the first mechanics step; per mechanics step the predictor, mode, CG "
+        "iterations and wall time.",
+        "",
+        "| model | build s | step | predictor | mode | CG iterations | mechanics s |",
+        "|---|---:|---:|---|---|---:|---:|",
+    ]
+    for run in meta.get("engine", []):
+        for st in run["steps"]:
+            lines.append(
+                f"| {run['model'] or '- (previous)'} | {run['build_s']:.2f} | {st['step']} | "
+                f"{st['predictor']} | {st['mode']} | {st['iterations']} | {st['wall_s']:.3f} |"
+            )
     notes = out.with_name(out.stem + "_notes.md")
     if notes.exists():
         lines += ["", notes.read_text().rstrip()]
@@ -592,6 +608,32 @@ def trained_before(
     model = cls.from_constructor_args(saved["constructor_args"])
     model.load_state_dict(saved["state"])
     return model.to(args.device), list(saved.get("history", [])), float(saved.get("minutes", 0.0))
+
+
+def in_the_engine(model: Path | None, steps: int = 3) -> dict[str, Any]:
+    """The shipped default scene on its grid, built and stepped until ``steps`` mechanics steps
+    ran, with ``mechanics.predictor`` 'previous' (``model`` None) or 'auto' asking ``model``
+    where persistence has nothing: the build time and each mechanics step's predictor, mode, CG
+    iterations and wall time (what the network's start buys the engine)."""
+    from diathermy.engine.simulation import Simulation
+    from diathermy.scene import builtin_scene
+
+    scene = builtin_scene("default")
+    mech = (
+        {"predictor": "previous"} if model is None else {"predictor": "auto", "model": str(model)}
+    )
+    scene = scene.model_copy(update={"mechanics": scene.mechanics.model_copy(update=mech)})
+    t0 = time.perf_counter()
+    sim = Simulation(scene)
+    out: dict[str, Any] = {"model": None if model is None else model.name,
+                           "build_s": time.perf_counter() - t0, "steps": []}  # fmt: skip
+    while len(out["steps"]) < steps and sim.step_index < 60:
+        e = sim.step().effects["mechanics"]
+        if e.ran:
+            out["steps"].append({"step": sim.step_index, "predictor": e.extra.get("predictor"),
+                                 "mode": e.extra.get("mode"), "iterations": e.iterations,
+                                 "wall_s": e.wall_s})  # fmt: skip
+    return out
 
 
 def device_name(device: str) -> str:
@@ -694,9 +736,11 @@ def main(argv: list[str] | None = None) -> int:
     names = predictors(args.archs)
     summary = summarise(rows, names)
     grid = "x".join(str(n) for n in data["p"].shape[1:])
+    engine: list[dict[str, Any]] = [in_the_engine(None)]
     for arch in args.archs:
         path = model_checkpoint(args, base, arch, summary, rows)
         log(f"the direct{ARCHS[arch]} network as a model for the engine's grid: {path}")
+        engine.append(in_the_engine(path))
     meta = {
         "command": "python benchmarks/incremental_network.py "
         f"--train-runs {args.train_runs} --steps {args.steps} --epochs {args.epochs} "
@@ -709,7 +753,7 @@ def main(argv: list[str] | None = None) -> int:
         "grid": grid, "train_runs": args.train_runs, "steps": args.steps,
         "n_train": n_train, "n_val": n_val, "width": args.width,
         "epochs": args.epochs, "batch": args.batch, "lr": args.lr, "archs": args.archs,
-        "predictors": names, "train_minutes": minutes, "history": history,
+        "predictors": names, "train_minutes": minutes, "history": history, "engine": engine,
         "variants": [v.__dict__ for v in variants],
     }  # fmt: skip
     args.out.parent.mkdir(parents=True, exist_ok=True)

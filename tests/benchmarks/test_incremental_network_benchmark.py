@@ -48,6 +48,14 @@ def test_incremental_network_benchmark_runs_tiny(tmp_path: Path) -> None:
                                             "incremental-unet"}  # fmt: skip
     text = out.read_text()
     assert "| default | incremental-unet+patch |" in text and "Training history" in text
+    # in the engine: persistence, then 'auto' asking each direct network on the first step
+    engine = data["meta"]["engine"]
+    assert [r["model"] for r in engine] == [None, "cnn_24x32x48.pt", "cnn_24x32x48-unet.pt"]
+    assert engine[0]["steps"][0]["predictor"] == "none"
+    for run in engine[1:]:
+        first = run["steps"][0]
+        assert first["predictor"] == "cnn" and first["mode"] == "full" and first["iterations"] > 0
+    assert "| cnn_24x32x48-unet.pt |" in text
     for name in ("incremental.pt", "direct-unet.pt"):
         assert (tmp_path / "w" / name).exists()
     # --reuse: the networks read back with their histories, nothing trained again; another
