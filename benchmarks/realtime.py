@@ -1,7 +1,7 @@
 """Real time (issue #25): what a cutting step costs, full against incremental, one command.
 
     python benchmarks/realtime.py run [--scenes NAME ...] [--grids own uniform] [--steps N] [--tight]
-        [--tolerances X ...]
+        [--tolerances X ...] [--variant 'section.key=value, ...' ...] [--from-start]
     python benchmarks/realtime.py profile [--scenes default] [--grids own uniform] [--steps N]
     python benchmarks/realtime.py solvers [--grids 0 0.5] [--steps N] [--rounds N]
 
@@ -17,11 +17,17 @@ the residual check or the interval asks for it) and, on the uniform grid that ha
 model, ``cnn`` (the CNN predictor with its patch); with ``--tight`` also the incremental mode
 without its windowed polish (``TIGHT_MODE``: every polish iteration over the whole block), and
 with ``--tolerances`` the incremental mode at each of those ``mechanics.energy_tolerance`` values
-(what a looser guard buys and costs). Per mode: median, p90 and mean wall time per step,
+(what a looser guard buys and costs), with each ``--variant`` the incremental mode with those
+``solver`` and ``mechanics`` settings (e.g. ``'solver.electric_energy_tolerance=1e-4,
+mechanics.energy_tolerance=0.01'``). ``--from-start`` steps every mode from the scene's first
+step instead (a whole run when ``--steps`` is the scene's: the heating, the first vaporization and
+mechanics solve and the cut, where persistence has nothing or little to start from); the table
+then also gives each mode's cutting phase (the steps from its first cut on) on its own. Per mode: median, p90 and mean wall time per step,
 the real-time factor (dt / median wall) and the sustained one (dt / mean wall), the median
 time of each effect, the mechanics' share of local steps, and against ``full`` at the same step the max and mean strain-energy error and
 the max temperature error, and the final cut-volume difference. Writes
-``benchmarks/results/realtime.md`` and ``realtime.png`` (wall time per step).
+``realtime.md``, ``realtime.json`` (every step's record) and ``realtime.png`` (wall time per step)
+into ``--out`` (default ``benchmarks/results``).
 
 ``profile``: the same checkpoints, the incremental mode only, under cProfile: the functions
 that take the time of a cutting step (``benchmarks/results/realtime_profile.md``).
@@ -143,13 +149,15 @@ def configure(sim: Simulation, variant: str) -> None:
         backend.krylov.reuse = type(backend.krylov.reuse)(rebuild_due=True)  # set up anew
 
 
-def load_as(path: Path, **mechanics: Any) -> Simulation:
+def load_as(path: Path, solver: dict[str, Any] | None = None, **mechanics: Any) -> Simulation:
     """The checkpoint continued with ``solver.incremental`` and mechanics settings changed
-    (``incremental`` among them), exactly as ``Simulation.load_checkpoint`` continues it."""
+    (``incremental`` among them) and the ``solver`` section's keys given, exactly as
+    ``Simulation.load_checkpoint`` continues it."""
     incremental = mechanics.pop("incremental", True)
 
     def variant(scene: Scene) -> Scene:
         data = scene.model_dump()
+        data["solver"].update(solver or {})
         data["solver"]["incremental"] = incremental
         data["mechanics"].update(mechanics)
         return Scene.model_validate(data)
@@ -195,21 +203,60 @@ TOLERANCE_MODE = "incremental, energy_tolerance "
 that follows this prefix in the mode's name."""
 
 
-def modes_for(scene: Scene, tight: bool = False, tolerances: tuple[float, ...] = ()) -> list[str]:
+SETTINGS_MODE = "incremental with "
+"""``--variant``: the incremental mode with the scene settings that follow this prefix in the
+mode's name, ``section.key=value`` joined by ``, `` (sections ``solver`` and ``mechanics``)."""
+VARIANT_SECTIONS = ("solver", "mechanics")
+
+
+def parse_settings(spec: str) -> dict[str, dict[str, Any]]:
+    """``"solver.electric_energy_tolerance=1e-4, mechanics.energy_tolerance=0.01"`` as
+    {section: {key: value}}: values parsed as JSON where they are (numbers, true, null), else
+    kept as text; a bad item raises ValueError naming it."""
+    out: dict[str, dict[str, Any]] = {}
+    for item in filter(None, (p.strip() for p in spec.split(","))):
+        key, eq, text = item.partition("=")
+        section, dot, name = key.strip().partition(".")
+        if not eq or not dot or not name or section not in VARIANT_SECTIONS:
+            raise ValueError(
+                f"variant setting {item!r}: expected section.key=value with section one of "
+                f"{', '.join(VARIANT_SECTIONS)}"
+            )
+        try:
+            value: Any = json.loads(text.strip())
+        except json.JSONDecodeError:
+            value = text.strip()
+        out.setdefault(section, {})[name] = value
+    if not out:
+        raise ValueError(f"variant {spec!r} sets nothing")
+    return out
+
+
+def modes_for(
+    scene: Scene,
+    tight: bool = False,
+    tolerances: tuple[float, ...] = (),
+    variants: tuple[str, ...] = (),
+) -> list[str]:
     """The modes that apply: the CNN only with mechanics on a grid with a shipped model;
     ``tight``: also ``TIGHT_MODE``, ``tolerances``: a mode per mechanics energy tolerance,
-    where the scene has mechanics."""
+    where the scene has mechanics; ``variants``: a ``SETTINGS_MODE`` per settings spec (any
+    scene)."""
     mech = "mechanics" in scene.closed_effects
     cnn = mech and scene.resolution is None and tuple(scene.grid) == UNIFORM
     extra = ([TIGHT_MODE] if tight else []) + [f"{TOLERANCE_MODE}{t:g}" for t in tolerances]
-    return [m for m in MODES if m != "cnn" or cnn] + (extra if mech else [])
+    settings = [f"{SETTINGS_MODE}{v}" for v in variants]
+    return [m for m in MODES if m != "cnn" or cnn] + (extra if mech else []) + settings
 
 
 def load_mode(path: Path, mode: str) -> Simulation:
-    """The checkpoint continued in ``mode`` (a ``MODES`` key, ``TIGHT_MODE`` or a
-    ``TOLERANCE_MODE``)."""
+    """The checkpoint continued in ``mode`` (a ``MODES`` key, ``TIGHT_MODE``, a
+    ``TOLERANCE_MODE`` or a ``SETTINGS_MODE``)."""
     if mode.startswith(TOLERANCE_MODE):
         return load_as(path, energy_tolerance=float(mode.removeprefix(TOLERANCE_MODE)))
+    if mode.startswith(SETTINGS_MODE):
+        settings = parse_settings(mode.removeprefix(SETTINGS_MODE))
+        return load_as(path, settings.get("solver"), **settings.get("mechanics", {}))
     return load_as(path, **(TIGHT if mode == TIGHT_MODE else MODES[mode]))
 
 
@@ -242,51 +289,100 @@ def run_modes(path: Path, modes: list[str], steps: int) -> dict[str, dict[str, l
     return rec
 
 
+def command_line(a: argparse.Namespace) -> str:
+    """The ``run`` command that gave these results."""
+    parts = [
+        f"python benchmarks/realtime.py run --scenes {' '.join(a.scenes)} --grids "
+        f"{' '.join(a.grids)} --steps {a.steps}"
+    ]
+    if getattr(a, "from_start", False):
+        parts.append("--from-start")
+    if a.tight:
+        parts.append("--tight")
+    if a.tolerances:
+        parts.append("--tolerances " + " ".join(f"{t:g}" for t in a.tolerances))
+    parts += [f"--variant '{v}'" for v in getattr(a, "variant", [])]
+    return " ".join(parts)
+
+
+def cutting_steps(cut_m3: list[float]) -> list[int]:
+    """Indices of the steps from the first with a cut on (all of them when none cuts)."""
+    first = next((i for i, c in enumerate(cut_m3) if c > 0), None)
+    return list(range(len(cut_m3))) if first is None else list(range(first, len(cut_m3)))
+
+
 def write_run(runs: dict, a: argparse.Namespace, started: str, out: Path = RESULTS) -> None:
     load = os.getloadavg()
+    from_start = any(run.get("from_start") for run in runs.values())
+    where = (
+        "from its first step (a whole run: heating, the first vaporization and mechanics solve, "
+        "the cut)"
+        if from_start
+        else "checkpoint two steps after the first cut (or after the warm-up where it does not cut)"
+    )
     lines = [
         "# Real time: a cutting step, full against incremental",
         "",
-        f"`python benchmarks/realtime.py run --scenes {' '.join(a.scenes)} --grids "
-        f"{' '.join(a.grids)} --steps {a.steps}{' --tight' if a.tight else ''}"
-        f"{' --tolerances ' + ' '.join(f'{t:g}' for t in a.tolerances) if a.tolerances else ''}` "
-        "(started "
-        f"{started}): each scene from its "
-        "checkpoint two steps after the first cut (or after the warm-up where it does not cut), "
-        f"{a.steps} steps per mode, the modes stepped in lockstep; every measured step is in the "
-        "cutting phase where the scene cuts. A 2-core machine that other jobs may share (load "
+        f"`{command_line(a)}` (started {started}): each scene {where}, {a.steps} steps per mode, "
+        "the modes stepped in lockstep. A 2-core machine that other jobs may share (load "
         f"average when written: {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f}): wall times are "
         "inflated alike for every mode, read the ratios. Errors are against the full mode at "
-        "the same step (strain energy: the paper's relative L2 over tets). Effect columns: "
-        "median wall time of each effect per step (s). Real-time factor: dt / median step; "
-        "sustained factor: dt / mean step, which counts the interval's full solve (every "
-        "`mechanics.full_every` solves) that the median hides.",
+        "the same step (strain energy: the paper's relative L2 over tets), their max over "
+        "every measured step. Effect columns: median wall time of each effect per step (s). "
+        "Real-time factor: dt / median step; sustained factor: dt / mean step, which counts the "
+        "interval's full solve (every `mechanics.full_every` solves) that the median hides. "
+        "*Cutting phase*: the steps from the mode's first cut on (every step from a checkpoint "
+        "after the cut); *cut from*: the first measured step with a cut.",
         "",
         "| scene | grid | nodes | first cut | mode | median step s | p90 step s | mean step s | "
-        "x full | real-time factor | sustained factor | electric | thermal | mechanics | "
-        "dissection | local mechanics steps | max SE error | mean SE error | max T error K | "
-        "cut volume vs full |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "x full | real-time factor | sustained factor | cutting phase median / p90 s | "
+        "cut from | electric | thermal | mechanics | dissection | local mechanics steps | "
+        "max SE error | mean SE error | max T error K | cut volume vs full |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for (name, _grid), run in runs.items():
         rec, dt_s = run["rec"], run["dt_s"]
         base = float(np.median(rec["full"]["wall_s"]))
         cut_at = "none" if run["first_cut"] is None else f"step {run['first_cut']}"
+        if run.get("from_start"):
+            cut_at = "from step 0"
         for m, r in rec.items():
             med, p90 = float(np.median(r["wall_s"])), float(np.percentile(r["wall_s"], 90))
             mean = float(np.mean(r["wall_s"]))
+            phase = cutting_steps(r["cut_m3"])
+            walls = np.asarray(r["wall_s"])[phase]
+            cut_from = next((i + 1 for i, c in enumerate(r["cut_m3"]) if c > 0), None)
             cut, cut_ref = r["cut_m3"][-1], rec["full"]["cut_m3"][-1]
             rel_cut = (cut - cut_ref) / cut_ref if cut_ref > 0 else 0.0
             effects = " | ".join(f"{np.median(r[e]):.3f}" for e in EFFECTS if e != "vaporization")
             lines.append(
                 f"| {name} | {run['grid_label']} | {run['nodes']:,} | {cut_at} | {m} | {med:.2f} "
                 f"| {p90:.2f} | {mean:.2f} | {med / base:.2f} | {dt_s / med:.3f} | "
-                f"{dt_s / mean:.3f} | {effects} | "
+                f"{dt_s / mean:.3f} | {np.median(walls):.3f} / {np.percentile(walls, 90):.3f} | "
+                f"{'-' if cut_from is None else cut_from} | {effects} | "
                 f"{int(sum(r['local']))}/{len(r['local'])} | {max(r['se_err']):.2e} | "
                 f"{np.mean(r['se_err']):.2e} | {max(r['dT_k']):.2e} | {rel_cut:+.2e} |"
             )
     out.mkdir(parents=True, exist_ok=True)
     (out / "realtime.md").write_text("\n".join(lines) + "\n")
+    (out / "realtime.json").write_text(
+        json.dumps(
+            {
+                "command": command_line(a),
+                "started": started,
+                "runs": [
+                    {
+                        "scene": n,
+                        "grid": g,
+                        **{k: v for k, v in run.items() if k != "rec"},
+                        "modes": run["rec"],
+                    }
+                    for (n, g), run in runs.items()
+                ],
+            },
+            indent=1,
+        )
+    )
     plot_run(runs, out)
     print("\n".join(lines))
 
@@ -325,13 +421,18 @@ def measure(
     steps: int,
     tight: bool = False,
     tolerances: tuple[float, ...] = (),
+    variants: tuple[str, ...] = (),
+    from_start: bool = False,
 ) -> dict[str, Any]:
-    """``scene`` warmed up (checkpoint ``path``), then every mode that applies in lockstep."""
-    path, first_cut = warm_up(scene, path, warmup)
+    """``scene`` warmed up (checkpoint ``path``), then every mode that applies in lockstep;
+    ``from_start``: from the scene's first step instead (the checkpoint holds step 0), so the
+    steps span the heating, the first vaporization and mechanics solve, and the cut."""
+    path, first_cut = warm_up(scene, path, 0 if from_start else warmup)
     return {
-        "rec": run_modes(path, modes_for(scene, tight, tolerances), steps),
+        "rec": run_modes(path, modes_for(scene, tight, tolerances, variants), steps),
         "dt_s": scene.dt_s,
         "first_cut": first_cut,
+        "from_start": from_start,
         "nodes": int(np.prod(scene.node_shape)),
         "grid_label": "x".join(map(str, scene.node_shape))
         + (" graded" if scene.resolution is not None else " uniform"),
@@ -413,6 +514,21 @@ def main() -> None:
             default=[],
             help="run: also the incremental mode at each of these mechanics.energy_tolerance",
         )
+        r.add_argument(
+            "--variant",
+            action="append",
+            default=[],
+            metavar="SETTINGS",
+            help="run: also the incremental mode with these scene settings, e.g. "
+            "'solver.electric_energy_tolerance=1e-4, mechanics.energy_tolerance=0.01' "
+            "(repeatable)",
+        )
+        r.add_argument(
+            "--from-start",
+            action="store_true",
+            help="run: from the scene's first step (a whole run with --steps its steps) "
+            "instead of two steps after the first cut",
+        )
     s = sub.add_parser("solvers", help="per-saving cost of a cutting step")
     s.add_argument("--grids", nargs="+", type=float, default=[0.0, 0.5], help="0: uniform")
     s.add_argument("--steps", type=int, default=6)
@@ -420,14 +536,21 @@ def main() -> None:
     a = ap.parse_args()
     started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     if a.cmd == "run":
+        for v in a.variant:  # a bad setting stops the run before any warm-up
+            try:
+                parse_settings(v)
+            except ValueError as e:
+                ap.error(str(e))
         runs = {
             (n, g): measure(
                 scene_on(n, g),
-                CACHE / f"{n}_{g}.h5",
+                CACHE / f"{n}_{g}{'_start' if a.from_start else ''}.h5",
                 warmup=a.warmup,
                 steps=a.steps,
                 tight=a.tight,
                 tolerances=tuple(a.tolerances),
+                variants=tuple(a.variant),
+                from_start=a.from_start,
             )
             for n in a.scenes
             for g in a.grids

@@ -34,16 +34,29 @@ def test_tiny_run_writes_its_table(bench: ModuleType, tmp_path: Path) -> None:
     assert bench.modes_for(scene, tight=True)[-1] == bench.TIGHT_MODE
     loose = f"{bench.TOLERANCE_MODE}0.01"
     assert bench.modes_for(scene, tolerances=(1e-2,))[-1] == loose
+    loose_electric = "solver.electric_energy_tolerance=1e-4, mechanics.full_every=3"
+    settings = f"{bench.SETTINGS_MODE}{loose_electric}"
+    assert bench.modes_for(scene, variants=(loose_electric,))[-1] == settings
     run = bench.measure(
-        scene, tmp_path / "tiny.h5", warmup=40, steps=4, tight=True, tolerances=(1e-2,)
+        scene,
+        tmp_path / "tiny.h5",
+        warmup=40,
+        steps=4,
+        tight=True,
+        tolerances=(1e-2,),
+        variants=(loose_electric,),
     )
     assert run["first_cut"] is not None and (tmp_path / "tiny.json").exists()
     rec = run["rec"]
     assert rec["full"]["se_err"] == [0.0] * 4 and rec["full"]["local"] == [0.0] * 4
-    for mode in ("incremental", bench.TIGHT_MODE, loose):  # the default, the settings before it
+    for mode in ("incremental", bench.TIGHT_MODE, loose, settings):
         assert max(rec[mode]["se_err"]) <= 0.01 and max(rec[mode]["dT_k"]) <= 0.1
     sim = bench.load_mode(tmp_path / "tiny.h5", loose)
     assert sim.scene.mechanics.energy_tolerance == 1e-2
+    sim = bench.load_mode(tmp_path / "tiny.h5", settings)  # both sections set, the rest kept
+    assert sim.scene.solver.electric_energy_tolerance == 1e-4 and sim.scene.solver.incremental
+    assert sim.scene.mechanics.full_every == 3
+    assert sim.scene.mechanics.energy_tolerance == scene.mechanics.energy_tolerance
     assert rec["full"]["cut_m3"][-1] > 0 and all(t > 0 for t in rec["full"]["mechanics"])
     # the cached checkpoint is reused, with its first-cut step
     assert bench.warm_up(scene, tmp_path / "tiny.h5", 40)[1] == run["first_cut"]
@@ -56,11 +69,54 @@ def test_tiny_run_writes_its_table(bench: ModuleType, tmp_path: Path) -> None:
     assert (tmp_path / "tiny.h5").stat().st_mtime_ns != mtime
     assert json.loads((tmp_path / "tiny.json").read_text())["scene"] == other.model_dump_json()
     args = argparse.Namespace(
-        scenes=["tiny"], grids=["own"], steps=4, tight=True, tolerances=[1e-2]
+        scenes=["tiny"],
+        grids=["own"],
+        steps=4,
+        tight=True,
+        tolerances=[1e-2],
+        variant=[loose_electric],
+        from_start=False,
     )
     bench.write_run({("tiny", "own"): run}, args, "now", out=tmp_path)
     table = (tmp_path / "realtime.md").read_text()
     assert "| tiny | 9x9x17 uniform | 1,377 |" in table and "| incremental |" in table
     assert f"| {bench.TIGHT_MODE} |" in table and "--tight" in table
     assert f"| {loose} |" in table and "--tolerances 0.01" in table
+    assert f"| {settings} |" in table and f"--variant '{loose_electric}'" in table
     assert (tmp_path / "realtime.png").stat().st_size > 1000
+    saved = json.loads((tmp_path / "realtime.json").read_text())
+    assert saved["runs"][0]["modes"]["full"]["cut_m3"] == rec["full"]["cut_m3"]
+
+
+def test_settings_are_parsed_or_refused(bench: ModuleType) -> None:
+    assert bench.parse_settings(
+        "solver.electric_energy_tolerance=1e-4, mechanics.guard=energy"
+    ) == {
+        "solver": {"electric_energy_tolerance": 1e-4},
+        "mechanics": {"guard": "energy"},
+    }
+    for bad in ("", "energy_tolerance=1", "thermal.rtol=1", "mechanics.energy_tolerance"):
+        with pytest.raises(ValueError, match="variant"):
+            bench.parse_settings(bad)
+
+
+def test_whole_run_from_the_first_step(bench: ModuleType, tmp_path: Path) -> None:
+    """--from-start: the checkpoint holds step 0, the steps span the heating and the cut, and
+    the cutting phase is the steps from the first cut on."""
+    run = bench.measure(tiny_scene(), tmp_path / "start.h5", warmup=40, steps=30, from_start=True)
+    rec = run["rec"]
+    assert run["from_start"] and run["first_cut"] is None  # nothing stepped before the check point
+    cut = rec["full"]["cut_m3"]
+    assert cut[0] == 0 and cut[-1] > 0, "the tiny scene cuts within 30 steps"
+    phase = bench.cutting_steps(cut)
+    assert phase[0] > 0 and cut[phase[0]] > 0 and cut[phase[0] - 1] == 0
+    assert bench.cutting_steps([0.0, 0.0]) == [0, 1]  # no cut: every step
+    assert max(rec["incremental"]["se_err"]) <= 0.01 and max(rec["incremental"]["dT_k"]) <= 0.1
+    args = argparse.Namespace(
+        scenes=["tiny"], grids=["own"], steps=30, tight=False, tolerances=[], variant=[],
+        from_start=True,
+    )  # fmt: skip
+    bench.write_run({("tiny", "own"): run}, args, "now", out=tmp_path)
+    table = (tmp_path / "realtime.md").read_text()
+    assert "--from-start" in table and "from its first step" in table
+    assert f"| {phase[0] + 1} |" in table  # the full mode's 'cut from' column
