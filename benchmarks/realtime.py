@@ -18,7 +18,7 @@ model, ``cnn`` (the CNN predictor with its patch); with ``--tight`` also the inc
 without its windowed polish (``TIGHT_MODE``: every polish iteration over the whole block), and
 with ``--tolerances`` the incremental mode at each of those ``mechanics.energy_tolerance`` values
 (what a looser guard buys and costs), with each ``--variant`` the incremental mode with those
-``solver`` and ``mechanics`` settings (e.g. ``'solver.electric_energy_tolerance=1e-4,
+``solver`` and ``mechanics`` settings (``solver.incremental=false``: the full mode with them) (e.g. ``'solver.electric_energy_tolerance=1e-4,
 mechanics.energy_tolerance=0.01'``). ``--from-start`` steps every mode from the scene's first
 step instead (a whole run when ``--steps`` is the scene's: the heating, the first vaporization and
 mechanics solve and the cut, where persistence has nothing or little to start from); the table
@@ -203,9 +203,10 @@ TOLERANCE_MODE = "incremental, energy_tolerance "
 that follows this prefix in the mode's name."""
 
 
-SETTINGS_MODE = "incremental with "
+SETTINGS_MODE = "with "
 """``--variant``: the incremental mode with the scene settings that follow this prefix in the
-mode's name, ``section.key=value`` joined by ``, `` (sections ``solver`` and ``mechanics``)."""
+mode's name, ``section.key=value`` joined by ``, `` (sections ``solver`` and ``mechanics``;
+``solver.incremental=false`` makes it a full mode, e.g. the reference at a tighter tolerance)."""
 VARIANT_SECTIONS = ("solver", "mechanics")
 
 
@@ -256,7 +257,9 @@ def load_mode(path: Path, mode: str) -> Simulation:
         return load_as(path, energy_tolerance=float(mode.removeprefix(TOLERANCE_MODE)))
     if mode.startswith(SETTINGS_MODE):
         settings = parse_settings(mode.removeprefix(SETTINGS_MODE))
-        return load_as(path, settings.get("solver"), **settings.get("mechanics", {}))
+        solver = dict(settings.get("solver", {}))
+        incremental = bool(solver.pop("incremental", True))
+        return load_as(path, solver, incremental=incremental, **settings.get("mechanics", {}))
     return load_as(path, **(TIGHT if mode == TIGHT_MODE else MODES[mode]))
 
 
@@ -519,7 +522,8 @@ def main() -> None:
             action="append",
             default=[],
             metavar="SETTINGS",
-            help="run: also the incremental mode with these scene settings, e.g. "
+            help="run: also the incremental mode (solver.incremental=false: the full one) with "
+            "these scene settings, e.g. "
             "'solver.electric_energy_tolerance=1e-4, mechanics.energy_tolerance=0.01' "
             "(repeatable)",
         )

@@ -57,6 +57,9 @@ def test_tiny_run_writes_its_table(bench: ModuleType, tmp_path: Path) -> None:
     assert sim.scene.solver.electric_energy_tolerance == 1e-4 and sim.scene.solver.incremental
     assert sim.scene.mechanics.full_every == 3
     assert sim.scene.mechanics.energy_tolerance == scene.mechanics.energy_tolerance
+    tight = f"{bench.SETTINGS_MODE}solver.incremental=false, mechanics.rtol=1e-8"
+    sim = bench.load_mode(tmp_path / "tiny.h5", tight)  # a full mode at a tighter tolerance
+    assert not sim.scene.solver.incremental and sim.scene.mechanics.rtol == 1e-8
     assert rec["full"]["cut_m3"][-1] > 0 and all(t > 0 for t in rec["full"]["mechanics"])
     # the cached checkpoint is reused, with its first-cut step
     assert bench.warm_up(scene, tmp_path / "tiny.h5", 40)[1] == run["first_cut"]
