@@ -2,6 +2,7 @@
 
     python benchmarks/realtime.py run [--scenes NAME ...] [--grids own uniform] [--steps N] [--tight]
         [--tolerances X ...] [--variant 'section.key=value, ...' ...] [--from-start]
+    python benchmarks/realtime.py report FOLDER   # a run's table and plots again from its json
     python benchmarks/realtime.py profile [--scenes default] [--grids own uniform] [--steps N]
     python benchmarks/realtime.py solvers [--grids 0 0.5] [--steps N] [--rounds N]
 
@@ -26,8 +27,9 @@ then also gives each mode's cutting phase (the steps from its first cut on) on i
 the real-time factor (dt / median wall) and the sustained one (dt / mean wall), the median
 time of each effect, the mechanics' share of local steps, and against ``full`` at the same step the max and mean strain-energy error and
 the max temperature error, and the final cut-volume difference. Writes
-``realtime.md``, ``realtime.json`` (every step's record) and ``realtime.png`` (wall time per step)
-into ``--out`` (default ``benchmarks/results``).
+``realtime.md``, ``realtime.json`` (every step's record), ``realtime.png`` (wall time per step)
+and ``realtime_errors.png`` (each mode's errors per step against the targets) into ``--out``
+(default ``benchmarks/results``); ``report FOLDER`` writes them again from the json.
 
 ``profile``: the same checkpoints, the incremental mode only, under cProfile: the functions
 that take the time of a cutting step (``benchmarks/results/realtime_profile.md``).
@@ -314,8 +316,19 @@ def cutting_steps(cut_m3: list[float]) -> list[int]:
     return list(range(len(cut_m3))) if first is None else list(range(first, len(cut_m3)))
 
 
-def write_run(runs: dict, a: argparse.Namespace, started: str, out: Path = RESULTS) -> None:
-    load = os.getloadavg()
+def write_run(
+    runs: dict,
+    a: argparse.Namespace | str,
+    started: str,
+    out: Path = RESULTS,
+    load: tuple[float, ...] | None = None,
+) -> None:
+    """The table (``realtime.md``), every step's record (``realtime.json``, which ``report``
+    reads back) and the plots of ``runs``; ``a``: the run's arguments, or its command line;
+    ``load``: the load average the run ended with (default: now's)."""
+    command = a if isinstance(a, str) else command_line(a)
+    steps = max(len(r["wall_s"]) for run in runs.values() for r in run["rec"].values())
+    load = load or os.getloadavg()
     from_start = any(run.get("from_start") for run in runs.values())
     where = (
         "from its first step (a whole run: heating, the first vaporization and mechanics solve, "
@@ -326,7 +339,7 @@ def write_run(runs: dict, a: argparse.Namespace, started: str, out: Path = RESUL
     lines = [
         "# Real time: a cutting step, full against incremental",
         "",
-        f"`{command_line(a)}` (started {started}): each scene {where}, {a.steps} steps per mode, "
+        f"`{command}` (started {started}): each scene {where}, {steps} steps per mode, "
         "the modes stepped in lockstep. A 2-core machine that other jobs may share (load "
         f"average when written: {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f}): wall times are "
         "inflated alike for every mode, read the ratios. Errors are against the full mode at "
@@ -371,7 +384,8 @@ def write_run(runs: dict, a: argparse.Namespace, started: str, out: Path = RESUL
     (out / "realtime.json").write_text(
         json.dumps(
             {
-                "command": command_line(a),
+                "command": command,
+                "load": list(load),
                 "started": started,
                 "runs": [
                     {
@@ -387,7 +401,51 @@ def write_run(runs: dict, a: argparse.Namespace, started: str, out: Path = RESUL
         )
     )
     plot_run(runs, out)
+    plot_errors(runs, out)
     print("\n".join(lines))
+
+
+def read_run(folder: Path) -> tuple[dict, str, str, tuple[float, ...] | None]:
+    """(runs, command, started, load average) of a ``run``'s ``realtime.json`` in ``folder``."""
+    saved = json.loads((folder / "realtime.json").read_text())
+    runs = {
+        (r["scene"], r["grid"]): {
+            **{k: v for k, v in r.items() if k not in ("scene", "grid", "modes")},
+            "rec": r["modes"],
+        }
+        for r in saved["runs"]
+    }
+    load = saved.get("load")
+    return runs, saved["command"], saved["started"], None if load is None else tuple(load)
+
+
+def plot_errors(runs: dict, out: Path) -> None:
+    """Per scene, each approximate mode's strain-energy and temperature error against the full
+    mode at every step, with the issue's targets (1 %, 0.1 K): ``realtime_errors.png``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = len(runs)
+    fig, axes = plt.subplots(n, 2, figsize=(10, 3.2 * n), squeeze=False)
+    for (ax_se, ax_t), ((name, _grid), run) in zip(axes, runs.items(), strict=True):
+        for m, r in run["rec"].items():
+            if m == "full":
+                continue
+            steps = np.arange(1, len(r["se_err"]) + 1)
+            ax_se.plot(steps, np.maximum(r["se_err"], 1e-8), label=m, lw=1)
+            ax_t.plot(steps, np.maximum(r["dT_k"], 1e-6), label=m, lw=1)
+        for ax, target, what in ((ax_se, 0.01, "max SE error"), (ax_t, 0.1, "max T error (K)")):
+            ax.axhline(target, color="k", lw=0.8, ls="--", label="target")
+            ax.set_yscale("log")
+            ax.set_xlabel("step")
+            ax.set_ylabel(what)
+            ax.set_title(f"{name}, {run['grid_label']}: against full", fontsize=9)
+        ax_se.legend(fontsize=6)
+    fig.tight_layout()
+    fig.savefig(out / "realtime_errors.png", dpi=100)
+    plt.close(fig)
 
 
 def plot_run(runs: dict, out: Path) -> None:
@@ -533,6 +591,8 @@ def main() -> None:
             help="run: from the scene's first step (a whole run with --steps its steps) "
             "instead of two steps after the first cut",
         )
+    rp = sub.add_parser("report", help="rewrite a run's table and plots from its realtime.json")
+    rp.add_argument("folder", type=Path, help="the run's --out folder")
     s = sub.add_parser("solvers", help="per-saving cost of a cutting step")
     s.add_argument("--grids", nargs="+", type=float, default=[0.0, 0.5], help="0: uniform")
     s.add_argument("--steps", type=int, default=6)
@@ -563,6 +623,12 @@ def main() -> None:
         return
     if a.cmd == "profile":
         profile(a, started)
+        return
+    if a.cmd == "report":
+        if not (a.folder / "realtime.json").is_file():
+            ap.error(f"{a.folder}: no realtime.json (the --out folder of a 'run')")
+        runs, command, when, load = read_run(a.folder)
+        write_run(runs, command, when, a.folder, load)
         return
     results: dict[float, dict[str, list[dict[str, float]]]] = {}
     for fine in a.grids:

@@ -89,6 +89,12 @@ def test_tiny_run_writes_its_table(bench: ModuleType, tmp_path: Path) -> None:
     assert (tmp_path / "realtime.png").stat().st_size > 1000
     saved = json.loads((tmp_path / "realtime.json").read_text())
     assert saved["runs"][0]["modes"]["full"]["cut_m3"] == rec["full"]["cut_m3"]
+    assert (tmp_path / "realtime_errors.png").stat().st_size > 1000
+    runs, command, started, load = bench.read_run(tmp_path)  # 'report': the same table again
+    assert started == "now" and "--variant" in command and len(load) == 3
+    (tmp_path / "realtime.md").unlink()
+    bench.write_run(runs, command, started, tmp_path, load)
+    assert (tmp_path / "realtime.md").read_text() == table
 
 
 def test_settings_are_parsed_or_refused(bench: ModuleType) -> None:
