@@ -129,3 +129,5 @@ def test_whole_run_from_the_first_step(bench: ModuleType, tmp_path: Path) -> Non
     table = (tmp_path / "realtime.md").read_text()
     assert "--from-start" in table and "from its first step" in table
     assert f"| {phase[0] + 1} |" in table  # the full mode's 'cut from' column
+    assert "| - / - |" in table  # no step of the full mode is off itself
+    assert bench.first_over([0.0, 0.02, 0.5], 0.01) == "2" and bench.first_over([0.0], 1) == "-"
