@@ -4,29 +4,19 @@ the same system solved tight, and the table."""
 from __future__ import annotations
 
 import argparse
-import importlib.util
-import sys
 from pathlib import Path
 from types import ModuleType
 
 import numpy as np
 import pytest
 
+from tests.benchmarks.loading import load_benchmark
 from tests.engine.scenes import tiny_scene
-
-ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
 def bench() -> ModuleType:
-    sys.path.insert(0, str(ROOT / "benchmarks"))
-    spec = importlib.util.spec_from_file_location(
-        "guard_estimate", ROOT / "benchmarks/guard_estimate.py"
-    )
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_benchmark("guard_estimate")
 
 
 def test_estimates_are_checked_against_a_tight_solve(bench: ModuleType, tmp_path: Path) -> None:

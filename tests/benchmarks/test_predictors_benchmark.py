@@ -3,12 +3,12 @@ persistence and a network, alone and with the patch, and the report holds them i
 
 from __future__ import annotations
 
-import importlib.util
 import math
 from pathlib import Path
 
 from diathermy.mesh import build_tet_mesh
 from diathermy.surrogates.predictor import CNNPredictor
+from tests.benchmarks.loading import load_benchmark
 from tests.engine.scenes import tiny_scene
 from tests.surrogates.hybrid_helpers import untrained_model
 
@@ -16,13 +16,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def _load_benchmark():  # noqa: ANN202 (a module)
-    spec = importlib.util.spec_from_file_location(
-        "predictors_bench", ROOT / "benchmarks/predictors.py"
-    )
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("predictors")
 
 
 def test_predictors_benchmark_scores_every_case_on_a_tiny_scene(tmp_path: Path) -> None:

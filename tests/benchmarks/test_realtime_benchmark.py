@@ -4,30 +4,27 @@ against the full mode, and the results table and plot."""
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
-import sys
 from pathlib import Path
 from types import ModuleType
 
 import pytest
 
+from tests.benchmarks.loading import load_benchmark
 from tests.engine.scenes import tiny_scene
-
-ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
 def bench() -> ModuleType:
-    sys.path.insert(0, str(ROOT / "benchmarks"))
-    spec = importlib.util.spec_from_file_location("realtime", ROOT / "benchmarks/realtime.py")
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_benchmark("realtime")
 
 
-def test_tiny_run_writes_its_table(bench: ModuleType, tmp_path: Path) -> None:
+@pytest.fixture(scope="module")
+def report() -> ModuleType:
+    return load_benchmark("realtime_report")
+
+
+def test_tiny_run_writes_its_table(bench: ModuleType, report: ModuleType, tmp_path: Path) -> None:
     scene = tiny_scene()
     assert bench.modes_for(scene) == ["full", "incremental"]  # no model for a 9x9x17 grid
     assert bench.modes_for(bench.scene_on("coagulation", "uniform")) == ["full", "incremental"]
@@ -80,7 +77,7 @@ def test_tiny_run_writes_its_table(bench: ModuleType, tmp_path: Path) -> None:
         variant=[loose_electric],
         from_start=False,
     )
-    bench.write_run({("tiny", "own"): run}, args, "now", out=tmp_path)
+    report.write_run({("tiny", "own"): run}, args, "now", out=tmp_path)
     table = (tmp_path / "realtime.md").read_text()
     assert "| tiny | 9x9x17 uniform | 1,377 |" in table and "| incremental |" in table
     assert f"| {bench.TIGHT_MODE} |" in table and "--tight" in table
@@ -90,10 +87,10 @@ def test_tiny_run_writes_its_table(bench: ModuleType, tmp_path: Path) -> None:
     saved = json.loads((tmp_path / "realtime.json").read_text())
     assert saved["runs"][0]["modes"]["full"]["cut_m3"] == rec["full"]["cut_m3"]
     assert (tmp_path / "realtime_errors.png").stat().st_size > 1000
-    runs, command, started, load = bench.read_run(tmp_path)  # 'report': the same table again
+    runs, command, started, load = report.read_run(tmp_path)  # 'report': the same table again
     assert started == "now" and "--variant" in command and len(load) == 3
     (tmp_path / "realtime.md").unlink()
-    bench.write_run(runs, command, started, tmp_path, load)
+    report.write_run(runs, command, started, tmp_path, load)
     assert (tmp_path / "realtime.md").read_text() == table
 
 
@@ -109,7 +106,9 @@ def test_settings_are_parsed_or_refused(bench: ModuleType) -> None:
             bench.parse_settings(bad)
 
 
-def test_whole_run_from_the_first_step(bench: ModuleType, tmp_path: Path) -> None:
+def test_whole_run_from_the_first_step(
+    bench: ModuleType, report: ModuleType, tmp_path: Path
+) -> None:
     """--from-start: the checkpoint holds step 0, the steps span the heating and the cut, and
     the cutting phase is the steps from the first cut on."""
     run = bench.measure(tiny_scene(), tmp_path / "start.h5", warmup=40, steps=30, from_start=True)
@@ -117,17 +116,17 @@ def test_whole_run_from_the_first_step(bench: ModuleType, tmp_path: Path) -> Non
     assert run["from_start"] and run["first_cut"] is None  # nothing stepped before the check point
     cut = rec["full"]["cut_m3"]
     assert cut[0] == 0 and cut[-1] > 0, "the tiny scene cuts within 30 steps"
-    phase = bench.cutting_steps(cut)
+    phase = report.cutting_steps(cut)
     assert phase[0] > 0 and cut[phase[0]] > 0 and cut[phase[0] - 1] == 0
-    assert bench.cutting_steps([0.0, 0.0]) == [0, 1]  # no cut: every step
+    assert report.cutting_steps([0.0, 0.0]) == [0, 1]  # no cut: every step
     assert max(rec["incremental"]["se_err"]) <= 0.01 and max(rec["incremental"]["dT_k"]) <= 0.1
     args = argparse.Namespace(
         scenes=["tiny"], grids=["own"], steps=30, tight=False, tolerances=[], variant=[],
         from_start=True,
     )  # fmt: skip
-    bench.write_run({("tiny", "own"): run}, args, "now", out=tmp_path)
+    report.write_run({("tiny", "own"): run}, args, "now", out=tmp_path)
     table = (tmp_path / "realtime.md").read_text()
     assert "--from-start" in table and "from its first step" in table
     assert f"| {phase[0] + 1} |" in table  # the full mode's 'cut from' column
     assert "| - / - |" in table  # no step of the full mode is off itself
-    assert bench.first_over([0.0, 0.02, 0.5], 0.01) == "2" and bench.first_over([0.0], 1) == "-"
+    assert report.first_over([0.0, 0.02, 0.5], 0.01) == "2" and report.first_over([0.0], 1) == "-"
