@@ -45,7 +45,7 @@ _CHEBYSHEV = ("chebyshev", {"degree": 1})
 """Degree 1: a V-cycle of about 4 fine-level mat-vecs against 8 with degree 3. A full solve takes
 about twice the CG iterations at the same or lower cost; the incremental mode's polish, a few
 iterations from a close start each step, takes about 35 % less mechanics time per cutting step
-on the graded grids with the 3e-3 energy tolerance (docs/realtime.md, 2026-12-03)."""
+on the graded grids with a 3e-3 energy tolerance (docs/realtime.md, 2026-12-03)."""
 DEFAULT_AMG_OPTIONS: dict[str, Any] = {
     "presmoother": _CHEBYSHEV,
     "postsmoother": _CHEBYSHEV,
