@@ -29,7 +29,9 @@ time of each effect, the mechanics' share of local steps, and against ``full`` a
 the max temperature error, and the final cut-volume difference. Writes
 ``realtime.md``, ``realtime.json`` (every step's record), ``realtime.png`` (wall time per step)
 and ``realtime_errors.png`` (each mode's errors per step against the targets) into ``--out``
-(default ``benchmarks/results``); ``report FOLDER`` writes them again from the json.
+(default ``benchmarks/results``); ``report FOLDER`` writes them again from the json. With more
+than one (scene, grid) pair each pair runs in a process of its own (``run_apart``: memory) and
+the results are merged into one table.
 
 ``profile``: the same checkpoints, the incremental mode only, under cProfile: the functions
 that take the time of a cutting step (``benchmarks/results/realtime_profile.md``).
@@ -369,7 +371,50 @@ def profile(a: argparse.Namespace, started: str) -> None:
     print("\n".join(lines))
 
 
-def main() -> None:
+def run_args(a: argparse.Namespace, scene: str, grid: str, out: Path) -> list[str]:
+    """The ``run`` command line (after the script) that measures ``scene`` on ``grid`` alone
+    with ``a``'s settings, its results in ``out``."""
+    args = ["run", "--scenes", scene, "--grids", grid, "--steps", str(a.steps)]
+    args += ["--warmup", str(a.warmup), "--out", str(out)]
+    if a.from_start:
+        args.append("--from-start")
+    if a.tight:
+        args.append("--tight")
+    if a.tolerances:
+        args += ["--tolerances", *map(repr, a.tolerances)]
+    for v in a.variant:
+        args += ["--variant", v]
+    return args
+
+
+def run_apart(a: argparse.Namespace, started: str) -> None:
+    """Each (scene, grid) of ``a`` measured in a process of its own, the results merged into
+    one table. In one process the memory of the larger grids' runs was not given back to the
+    system between them: the default command (every scene on both grids) reached 22 GB on the
+    moving-electrode-slow scene; a process per pair holds at most one pair's modes (about 10 GB on
+    the moving electrode's 279 k nodes). A pair that fails stops the run with what was measured
+    before it written."""
+    import subprocess
+    import tempfile
+
+    runs: dict = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in a.scenes:
+            for g in a.grids:
+                out = Path(tmp) / f"{n}-{g}"
+                cmd = [sys.executable, str(Path(__file__).resolve()), *run_args(a, n, g, out)]
+                print(f"=== {n} on the {g} grid", flush=True)
+                rc = subprocess.run(cmd).returncode
+                if rc != 0:
+                    if runs:
+                        write_run(runs, a, started, a.out)
+                    sys.exit(f"realtime.py: the run of {n} on the {g} grid failed (exit {rc})")
+                runs.update(read_run(out)[0])
+    write_run(runs, a, started, a.out)
+
+
+def parser() -> argparse.ArgumentParser:
+    """The command line of every subcommand."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
     for cmd, help_, steps in (
@@ -417,6 +462,11 @@ def main() -> None:
     s.add_argument("--grids", nargs="+", type=float, default=[0.0, 0.5], help="0: uniform")
     s.add_argument("--steps", type=int, default=6)
     s.add_argument("--rounds", type=int, default=1)
+    return ap
+
+
+def main() -> None:
+    ap = parser()
     a = ap.parse_args()
     started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     if a.cmd == "run":
@@ -425,6 +475,9 @@ def main() -> None:
                 parse_settings(v)
             except ValueError as e:
                 ap.error(str(e))
+        if len(a.scenes) * len(a.grids) > 1:
+            run_apart(a, started)
+            return
         runs = {
             (n, g): measure(
                 scene_on(n, g),

@@ -94,6 +94,22 @@ def test_tiny_run_writes_its_table(bench: ModuleType, report: ModuleType, tmp_pa
     assert (tmp_path / "realtime.md").read_text() == table
 
 
+def test_each_scene_and_grid_runs_in_a_process_of_its_own(bench: ModuleType) -> None:
+    """A run of several (scene, grid) pairs hands each to a child with the same settings."""
+    argv = ["run", "--scenes", "default", "fixed-electrode", "--steps", "5", "--warmup", "7"]
+    argv += ["--from-start", "--tight", "--tolerances", "0.01", "3e-3"]
+    argv += ["--variant", "mechanics.full_every=3", "--variant", "solver.incremental=false"]
+    a = bench.parser().parse_args(argv)
+    child = bench.parser().parse_args(bench.run_args(a, "fixed-electrode", "uniform", Path("x")))
+    assert child.scenes == ["fixed-electrode"] and child.grids == ["uniform"]
+    assert child.out == Path("x")
+    for key in ("steps", "warmup", "from_start", "tight", "tolerances", "variant"):
+        assert getattr(child, key) == getattr(a, key), key
+    plain = bench.parser().parse_args(["run", "--scenes", "default"])
+    child = bench.parser().parse_args(bench.run_args(plain, "default", "own", Path("y")))
+    assert not child.from_start and not child.tight and child.tolerances == [] == child.variant
+
+
 def test_settings_are_parsed_or_refused(bench: ModuleType) -> None:
     assert bench.parse_settings(
         "solver.electric_energy_tolerance=1e-4, mechanics.guard=energy"
