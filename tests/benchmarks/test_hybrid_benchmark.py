@@ -2,28 +2,24 @@
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
+from types import ModuleType
 
 import torch
 
 from diathermy.datagen.engine_samples import EngineSamplesConfig, random_scene
 from diathermy.mesh import Grid
 from diathermy.surrogates import CNNConfig, DisplacementCNN, FieldScales, save_checkpoint
+from tests.benchmarks.loading import load_benchmark
 
-ROOT = Path(__file__).resolve().parents[2]
 TINY = EngineSamplesConfig(
     grid=(7, 7, 13), block_m=(0.02, 0.01, 0.01), n_steps=9, power_w=(30.0, 40.0),
     margin_m=0.004, seed=3,
 )  # fmt: skip
 
 
-def _load_benchmark():  # noqa: ANN202 (a module)
-    spec = importlib.util.spec_from_file_location("hybrid_benchmark", ROOT / "benchmarks/hybrid.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def _load_benchmark() -> ModuleType:
+    return load_benchmark("hybrid")
 
 
 def test_hybrid_benchmark_runs_a_tiny_scene_and_writes_its_report(tmp_path: Path) -> None:

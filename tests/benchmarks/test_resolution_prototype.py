@@ -2,19 +2,13 @@
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.benchmarks.loading import load_benchmark
 
 
 def test_resolution_prototype_runs_tiny_grids(tmp_path: Path) -> None:
-    spec = importlib.util.spec_from_file_location(
-        "resolution_prototype", ROOT / "benchmarks/resolution_prototype.py"
-    )
-    assert spec is not None and spec.loader is not None
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = load_benchmark("resolution_prototype")
     out = bench.main(
         ["--uniform-nz", "9", "--fine-mm", "6", "--margin-mm", "8", "--out", str(tmp_path / "r.md")]
     )

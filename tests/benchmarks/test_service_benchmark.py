@@ -2,24 +2,22 @@
 
 from __future__ import annotations
 
-import importlib.util
 import subprocess
 import sys
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 import pytest
+
+from tests.benchmarks.loading import load_benchmark
 
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / "benchmarks" / "service.py"
 
 
-def _load_benchmark():  # noqa: ANN202 (a module)
-    spec = importlib.util.spec_from_file_location("service_benchmark", SCRIPT)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def _load_benchmark() -> ModuleType:
+    return load_benchmark("service")
 
 
 def test_service_benchmark_runs_tiny_and_writes_its_table(tmp_path: Path) -> None:

@@ -2,18 +2,14 @@
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
+from types import ModuleType
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.benchmarks.loading import load_benchmark
 
 
-def _load_benchmark():  # noqa: ANN202 (a module)
-    spec = importlib.util.spec_from_file_location("viewer_benchmark", ROOT / "benchmarks/viewer.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def _load_benchmark() -> ModuleType:
+    return load_benchmark("viewer")
 
 
 def test_viewer_benchmark_runs_tiny_and_writes_its_table(tmp_path: Path) -> None:
