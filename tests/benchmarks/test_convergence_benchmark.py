@@ -1,5 +1,6 @@
-"""A tiny run of benchmarks/convergence.py: its scene family, its sub-step crossing times, and a
-run -> report round trip on a coarse graded grid."""
+"""A tiny run of benchmarks/convergence.py: its scene family, the sub-step crossing times and
+the tables of benchmarks/convergence_report.py, and a run -> report round trip on a coarse graded
+grid."""
 
 from __future__ import annotations
 
@@ -19,12 +20,17 @@ def bench() -> ModuleType:
     return load_benchmark("convergence")
 
 
-def test_crossing_is_exact_for_a_linear_rise(bench: ModuleType) -> None:
+@pytest.fixture(scope="module")
+def report() -> ModuleType:
+    return load_benchmark("convergence_report")
+
+
+def test_crossing_is_exact_for_a_linear_rise(report: ModuleType) -> None:
     t = np.array([0.03, 0.06, 0.09, 0.12])
     v = 310.0 + 600.0 * t  # passes 373.15 K at t = 0.10525 s, inside the 4th step
-    assert bench.crossing(t, v, 373.15, 310.0) == pytest.approx(63.15 / 600.0, rel=1e-12)
-    assert bench.crossing(t, v, 320.0, 310.0) == pytest.approx(10.0 / 600.0, rel=1e-12)
-    assert math.isnan(bench.crossing(t, v, 1e4, 310.0))
+    assert report.crossing(t, v, 373.15, 310.0) == pytest.approx(63.15 / 600.0, rel=1e-12)
+    assert report.crossing(t, v, 320.0, 310.0) == pytest.approx(10.0 / 600.0, rel=1e-12)
+    assert math.isnan(report.crossing(t, v, 1e4, 310.0))
 
 
 def test_scene_family(bench: ModuleType) -> None:
@@ -43,47 +49,53 @@ def test_scene_family(bench: ModuleType) -> None:
     assert draped.electrodes[0].contact == "draped"
 
 
-def test_run_then_report(bench: ModuleType, tmp_path: Path, monkeypatch) -> None:
+def test_run_then_report(
+    bench: ModuleType, report: ModuleType, tmp_path: Path, monkeypatch
+) -> None:
     monkeypatch.setattr(bench, "RESULTS", tmp_path)
+    monkeypatch.setattr(report, "RESULTS", tmp_path)
     out = bench.run(4.0, moving=False, seconds=0.09, wall_limit=60.0)
     d = np.load(out)
     assert d["time_s"].size == 3 and float(d["fine_mm"]) == 4.0
     assert d["w_front"].shape == d["cut_m3"].shape and float(d["kappa"]) > 0
-    bench.report()
+    report.report()
     text = (tmp_path / "convergence.md").read_text()
     assert "| 4mm (" in text and "42.52 W" in text
     assert (tmp_path / "convergence.png").stat().st_size > 0
 
 
-def test_drilling_rate_is_the_depth_slope(bench: ModuleType) -> None:
+def test_drilling_rate_is_the_depth_slope(report: ModuleType) -> None:
     t = np.arange(1, 61) * 0.03
     d = {"time_s": t, "depth_m": 1e-3 + 4e-3 * t}  # 4 mm/s
-    assert bench.drilling_rate(d) == pytest.approx(4e-3, rel=1e-9)
-    assert math.isnan(bench.drilling_rate({"time_s": t[:30], "depth_m": t[:30]}))  # ends early
+    assert report.drilling_rate(d) == pytest.approx(4e-3, rel=1e-9)
+    assert math.isnan(report.drilling_rate({"time_s": t[:30], "depth_m": t[:30]}))  # ends early
 
 
-def test_nonlocal_run_and_probe_then_report(bench: ModuleType, tmp_path: Path, monkeypatch) -> None:
+def test_nonlocal_run_and_probe_then_report(
+    bench: ModuleType, report: ModuleType, tmp_path: Path, monkeypatch
+) -> None:
     """A non-local run lands in its own table beside the local run of its grid, not in the
     ladder; the floor probe's JSON becomes the table under the contact."""
     monkeypatch.setattr(bench, "RESULTS", tmp_path)
+    monkeypatch.setattr(report, "RESULTS", tmp_path)
     bench.run(4.0, moving=False, seconds=0.09, wall_limit=60.0)
     out = bench.run(4.0, moving=False, seconds=0.09, wall_limit=60.0, length_mm=2.0)
     assert out.name == "convergence_fixed_4mm_l2.npz" and float(np.load(out)["length_mm"]) == 2.0
     probe = bench.floor_probe(4.0, 3)
     records = json.loads(probe.read_text())["4"]
     assert len(records) == 3 and records[-1]["floor_t_k"] > 310.0
-    bench.report()
+    report.report()
     text = (tmp_path / "convergence.md").read_text()
     assert "| 4 mm | 2 | flat |" in text  # the variants' table
     assert "4mm_l2 (" not in text  # not a row of the ladder
 
 
 def test_ladder_compares_each_contact_at_the_finest_draped_end(
-    bench: ModuleType, monkeypatch
+    report: ModuleType, monkeypatch
 ) -> None:
     """The draped ladder and the flat one at the time the finest draped run reached, each
     against its own finest run; a run that stopped earlier shows - in the variants' table."""
-    monkeypatch.setattr(bench, "summary", lambda d: {"cut_interp": 0.05})
+    monkeypatch.setattr(report, "summary", lambda d: {"cut_interp": 0.05})
     t_long, t_short = np.arange(1, 11) * 0.1, np.arange(1, 6) * 0.1
 
     def run(fine: float, scale: float, t: np.ndarray, contact: str) -> dict[str, np.ndarray]:
@@ -101,7 +113,7 @@ def test_ladder_compares_each_contact_at_the_finest_draped_end(
         "fixed_0.4mm_draped": run(0.4, 0.9, t_long, "draped"),
         "fixed_0.2mm_draped": run(0.2, 1.0, t_short, "draped"),
     }
-    text = "\n".join(bench._variant_lines(runs, ["fixed_0.4mm_draped", "fixed_0.2mm_draped"]))
+    text = "\n".join(report._variant_lines(runs, ["fixed_0.4mm_draped", "fixed_0.2mm_draped"]))
     assert "cut 0.50 s mm^3" in text and "cut 1.00 s mm^3" in text
     assert "| 0.2 mm | 0 | draped | 0.50 |" in text and "| - | - | - |" in text
     assert (
@@ -114,7 +126,9 @@ def test_ladder_compares_each_contact_at_the_finest_draped_end(
     )
 
 
-def test_surface_refined_ladder_sits_beside_the_plain_runs(bench: ModuleType) -> None:
+def test_surface_refined_ladder_sits_beside_the_plain_runs(
+    bench: ModuleType, report: ModuleType
+) -> None:
     """Refined runs form their own ladder, each beside the plain run of its fine spacing, with
     ratios against the finest refined run at the times it reached; the tag names the surface."""
     assert bench.tag_of(0.4, False, surface_mm=0.1) == "fixed_0.4mm_s0.1"
@@ -146,7 +160,7 @@ def test_surface_refined_ladder_sits_beside_the_plain_runs(bench: ModuleType) ->
         "fixed_0.2mm_s0.05": run(0.2, 0.05, 1.0, 0.02),
     }
     text = "\n".join(
-        bench._surface_lines(runs, ["fixed_0.4mm_s0.1", "fixed_0.2mm_s0.05"], ["fixed_0.4mm"])
+        report._surface_lines(runs, ["fixed_0.4mm_s0.1", "fixed_0.2mm_s0.05"], ["fixed_0.4mm"])
     )
     assert "against the finest refined run (fixed_0.2mm_s0.05)" in text
     assert "cut 1.62 s mm^3 | / finest | cut 3 s mm^3 | / finest |" in text
@@ -157,15 +171,16 @@ def test_surface_refined_ladder_sits_beside_the_plain_runs(bench: ModuleType) ->
 
 
 def test_surface_cost_steps_both_grids_and_reports_the_ratio(
-    bench: ModuleType, tmp_path: Path, monkeypatch
+    bench: ModuleType, report: ModuleType, tmp_path: Path, monkeypatch
 ) -> None:
     """The cost comparison on a coarse grid: both grids step, the refined one has more nodes
     and its top cell, and the report states the ratio."""
     monkeypatch.setattr(bench, "RESULTS", tmp_path)
+    monkeypatch.setattr(report, "RESULTS", tmp_path)
     out = bench.surface_cost(4.0, 1.0, warm=1, steps=2)
     c = json.loads(out.read_text())
     plain, refined = c["runs"]["plain"], c["runs"]["surface"]
     assert refined["nodes"] > plain["nodes"] and refined["surface_mm"] == 1.0
     assert plain["median_s"] > 0 and "electric" in refined["effects_median_s"]
-    text = "\n".join(bench._cost_lines())
+    text = "\n".join(report._cost_lines())
     assert "Refined / plain: median step" in text and "| 1 |" in text
