@@ -270,7 +270,7 @@ def load_mode(path: Path, mode: str) -> Simulation:
 def run_modes(path: Path, modes: list[str], steps: int) -> dict[str, dict[str, list[float]]]:
     """Every mode from the checkpoint, stepped in lockstep; per mode the per-step records."""
     sims = {m: load_mode(path, m) for m in modes}
-    keys = ("wall_s", "se_err", "dT_k", "local", "cut_m3", *EFFECTS)
+    keys = ("wall_s", "se_err", "dT_k", "tets_apart", "local", "cut_m3", *EFFECTS)
     rec: dict[str, dict[str, list[float]]] = {m: {k: [] for k in keys} for m in modes}
     for _ in range(steps):
         for m, sim in sims.items():
@@ -292,6 +292,9 @@ def run_modes(path: Path, modes: list[str], steps: int) -> dict[str, dict[str, l
             )
             rec[m]["dT_k"].append(
                 float(np.abs(sim.state["temperature"] - ref["temperature"]).max())
+            )
+            rec[m]["tets_apart"].append(
+                float(np.count_nonzero(sim.state["removed"] != ref["removed"]))
             )
     return rec
 

@@ -66,6 +66,7 @@ def write_run(
     steps = max(len(r["wall_s"]) for run in runs.values() for r in run["rec"].values())
     load = load or os.getloadavg()
     from_start = any(run.get("from_start") for run in runs.values())
+    apart = all("tets_apart" in r for run in runs.values() for r in run["rec"].values())
     where = (
         "from its first step (a whole run: heating, the first vaporization and mechanics solve, "
         "the cut)"
@@ -85,15 +86,23 @@ def write_run(
         "interval's full solve (every `mechanics.full_every` solves) that the median hides. "
         "*First step over*: the first measured step whose error passes the issue's target. "
         "*Cutting phase*: the steps from the mode's first cut on (every step from a checkpoint "
-        "after the cut); *cut from*: the first measured step with a cut.",
+        "after the cut); *cut from*: the first measured step with a cut."
+        + (
+            " *Tets cut apart*: the most tets whose removed state differs from the full mode's "
+            "at one step, and on how many steps any does; *max T error, cut alike*: the max "
+            "temperature error over the steps where none does."
+            if apart
+            else ""
+        ),
         "",
         "| scene | grid | nodes | first cut | mode | median step s | p90 step s | mean step s | "
         "x full | real-time factor | sustained factor | cutting phase median / p90 s | "
         "cut from | electric | thermal | mechanics | dissection | local mechanics steps | "
         "max SE error | mean SE error | max T error K | first step over 1 % SE / 0.1 K | "
-        "cut volume vs full |",
+        "cut volume vs full |"
+        + (" tets cut apart (steps) | max T error, cut alike K |" if apart else ""),
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
-        "---|",
+        "---|" + ("---|---|" if apart else ""),
     ]
     for (name, _grid), run in runs.items():
         rec, dt_s = run["rec"], run["dt_s"]
@@ -118,7 +127,7 @@ def write_run(
                 f"{int(sum(r['local']))}/{len(r['local'])} | {max(r['se_err']):.2e} | "
                 f"{np.mean(r['se_err']):.2e} | {max(r['dT_k']):.2e} | "
                 f"{first_over(r['se_err'], SE_TARGET)} / {first_over(r['dT_k'], T_TARGET_K)} | "
-                f"{rel_cut:+.2e} |"
+                f"{rel_cut:+.2e} |" + (apart_cells(r) if apart else "")
             )
     out.mkdir(parents=True, exist_ok=True)
     (out / "realtime.md").write_text("\n".join(lines) + "\n")
@@ -146,6 +155,16 @@ def write_run(
     print("\n".join(lines))
 
 
+def apart_cells(r: dict[str, list[float]]) -> str:
+    """The two cut-agreement cells of a mode's row: the most tets whose removed state differs
+    from the full mode's at one step (and on how many steps any does), and the max temperature
+    error over the steps where none does (K)."""
+    apart = np.asarray(r["tets_apart"])
+    alike = np.asarray(r["dT_k"])[apart == 0]
+    worst = f"{alike.max():.2e}" if alike.size else "-"
+    return f" {int(apart.max())} ({int(np.count_nonzero(apart))}) | {worst} |"
+
+
 def read_run(folder: Path) -> tuple[dict, str, str, tuple[float, ...] | None]:
     """(runs, command, started, load average) of a ``run``'s ``realtime.json`` in ``folder``."""
     saved = json.loads((folder / "realtime.json").read_text())
@@ -162,7 +181,8 @@ def read_run(folder: Path) -> tuple[dict, str, str, tuple[float, ...] | None]:
 
 def plot_errors(runs: dict, out: Path) -> None:
     """Per scene, each approximate mode's strain-energy and temperature error against the full
-    mode at every step, with the issue's targets (1 %, 0.1 K): ``realtime_errors.png``."""
+    mode at every step, with the issue's targets (1 %, 0.1 K), and where recorded the tets whose
+    removed state differs from the full mode's (dotted, right axis): ``realtime_errors.png``."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -171,12 +191,17 @@ def plot_errors(runs: dict, out: Path) -> None:
     n = len(runs)
     fig, axes = plt.subplots(n, 2, figsize=(10, 3.2 * n), squeeze=False)
     for (ax_se, ax_t), ((name, _grid), run) in zip(axes, runs.items(), strict=True):
+        apart_ax = None
         for m, r in run["rec"].items():
             if m == "full":
                 continue
             steps = np.arange(1, len(r["se_err"]) + 1)
             ax_se.plot(steps, np.maximum(r["se_err"], 1e-8), label=m, lw=1)
-            ax_t.plot(steps, np.maximum(r["dT_k"], 1e-6), label=m, lw=1)
+            line = ax_t.plot(steps, np.maximum(r["dT_k"], 1e-6), label=m, lw=1)[0]
+            if "tets_apart" in r and any(r["tets_apart"]):
+                apart_ax = apart_ax or ax_t.twinx()
+                apart_ax.step(steps, r["tets_apart"], color=line.get_color(), lw=0.6, ls=":")
+                apart_ax.set_ylabel("tets cut apart (dotted)", fontsize=7)
         for ax, target, what in ((ax_se, SE_TARGET, "SE error"), (ax_t, T_TARGET_K, "T error (K)")):
             ax.axhline(target, color="k", lw=0.8, ls="--", label="target")  # SE_TARGET, T_TARGET_K
             ax.set_yscale("log")

@@ -145,4 +145,16 @@ def test_whole_run_from_the_first_step(
     assert "--from-start" in table and "from its first step" in table
     assert f"| {phase[0] + 1} |" in table  # the full mode's 'cut from' column
     assert "| - / - |" in table  # no step of the full mode is off itself
+    assert rec["full"]["tets_apart"] == [0.0] * 30  # the full mode's cut is its own
+    assert "| tets cut apart (steps) | max T error, cut alike K |" in table
+    assert f"| 0 (0) | {max(rec['full']['dT_k']):.2e} |" in table
     assert report.first_over([0.0, 0.02, 0.5], 0.01) == "2" and report.first_over([0.0], 1) == "-"
+
+
+def test_cut_agreement_cells_split_the_temperature_error(report: ModuleType) -> None:
+    """The steps where the cut differs from the full mode's are set apart from those where it
+    is alike: the worst temperature error of the latter, the most tets apart of the former."""
+    r = {"tets_apart": [0.0, 0.0, 3.0, 1.0, 0.0], "dT_k": [0.01, 0.02, 1.5, 0.9, 0.05]}
+    assert report.apart_cells(r) == " 3 (2) | 5.00e-02 |"
+    r = {"tets_apart": [2.0], "dT_k": [0.7]}
+    assert report.apart_cells(r) == " 2 (1) | - |"
