@@ -42,6 +42,7 @@ import resource  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -205,10 +206,10 @@ def run(
         profiles["profile_end"] = crater_profile(sim, centre)
     tag = tag_of(fine_mm, moving, dt_s, length_mm, contact, surface_mm)
     out = RESULTS / f"convergence_{tag}.npz"
+    arrays: dict[str, Any] = {**{k: np.asarray(v) for k, v in rec.items()}, **profiles}
     np.savez(
         out,
-        **{k: np.asarray(v) for k, v in rec.items()},
-        **profiles,
+        **arrays,
         fine_mm=res.fine_m * 1e3 if res is not None else 0.0,
         depth_mm=res.depth_m * 1e3 if res is not None else 0.0,
         dt_s=scene.dt_s,

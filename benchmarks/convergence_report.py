@@ -339,9 +339,9 @@ def _drilling_lines(runs: dict[str, dict[str, np.ndarray]], keys: list[str]) -> 
         )
     base = [(h, v) for k, h, v in rows if float(runs[k]["dt_s"]) == DT_S]
     if len(base) >= 2:
-        h = np.array([b[0] for b in base])
+        hs = np.array([b[0] for b in base])
         inv = np.array([1e-3 / b[1] for b in base])
-        B, A = np.polyfit(h, inv, 1)
+        B, A = np.polyfit(hs, inv, 1)
         lines.append(
             f"\nFit over the dt {DT_S:g} s runs: 1 / v = {A:.3f} s/mm + {B:.3f} s/mm^2 x h "
             f"(h the fine spacing in mm): a delay per cell layer that shrinks as h^2, with a limit "
@@ -529,13 +529,13 @@ def report() -> None:
         ]
         for k in fixed:
             s = sums[k]
-            rel = [
+            rels = [
                 s[q] / finest[q] - 1 if finest[q] and math.isfinite(finest[q]) else math.nan
                 for q in ("power0", "first_cut", "cut_interp", "cut3")
             ]
             lines.append(
                 f"| {k.removeprefix('fixed_')} | "
-                + " | ".join(_fmt(v, 100, 1) + " %" for v in rel)
+                + " | ".join(_fmt(v, 100, 1) + " %" for v in rels)
                 + " |"
             )
     if len(graded) >= 3:
