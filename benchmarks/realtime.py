@@ -105,10 +105,10 @@ def checkpoint(fine_mm: float) -> Path:
     return warm_up(scene_for(fine_mm, moving=False), path, warmup=10_000)[0]
 
 
-def warm_up(scene: Scene, path: Path, warmup: int) -> tuple[Path, int | None]:
+def warm_up(scene: Scene, path: Path, warmup: int, exact: bool = False) -> tuple[Path, int | None]:
     """``scene`` stepped to two steps after its first cut, or ``warmup`` steps if it has not cut
-    by then, checkpointed at ``path`` (reused when it exists for the same scene, settings
-    included); (path, first cut step or None)."""
+    by then (``exact``: ``warmup`` steps, cut or not), checkpointed at ``path`` (reused when it
+    exists for the same scene, settings included); (path, first cut step or None)."""
     meta = path.with_suffix(".json")
     scene_json = scene.model_dump_json()
     if path.exists() and meta.exists():
@@ -120,8 +120,11 @@ def warm_up(scene: Scene, path: Path, warmup: int) -> tuple[Path, int | None]:
     path.parent.mkdir(parents=True, exist_ok=True)
     sim = Simulation(scene)
     after_cut: int | None = None
-    while (after_cut is None and sim.step_index < warmup) or (
-        after_cut is not None and sim.step_index < after_cut + 2
+    while (
+        sim.step_index < warmup
+        if exact
+        else (after_cut is None and sim.step_index < warmup)
+        or (after_cut is not None and sim.step_index < after_cut + 2)
     ):
         r = sim.step()
         if after_cut is None and r.cut_volume_m3 > 0:
@@ -309,16 +312,22 @@ def measure(
     tolerances: tuple[float, ...] = (),
     variants: tuple[str, ...] = (),
     from_start: bool = False,
+    from_step: int | None = None,
 ) -> dict[str, Any]:
     """``scene`` warmed up (checkpoint ``path``), then every mode that applies in lockstep;
     ``from_start``: from the scene's first step instead (the checkpoint holds step 0), so the
-    steps span the heating, the first vaporization and mechanics solve, and the cut."""
-    path, first_cut = warm_up(scene, path, 0 if from_start else warmup)
+    steps span the heating, the first vaporization and mechanics solve, and the cut;
+    ``from_step``: from the state after exactly that many steps in the scene's own settings."""
+    if from_start:
+        from_step = 0
+    exact = from_step is not None
+    path, first_cut = warm_up(scene, path, from_step if exact else warmup, exact=exact)
     return {
         "rec": run_modes(path, modes_for(scene, tight, tolerances, variants), steps),
         "dt_s": scene.dt_s,
         "first_cut": first_cut,
-        "from_start": from_start,
+        "from_start": from_step == 0,
+        "from_step": from_step,
         "nodes": int(np.prod(scene.node_shape)),
         "grid_label": "x".join(map(str, scene.node_shape))
         + (" graded" if scene.resolution is not None else " uniform"),
@@ -374,6 +383,13 @@ def profile(a: argparse.Namespace, started: str) -> None:
     print("\n".join(lines))
 
 
+def start_suffix(a: argparse.Namespace) -> str:
+    """The checkpoint name's tail for ``a``'s starting point (one file per start)."""
+    if a.from_start:
+        return "_start"
+    return "" if a.from_step is None else f"_step{a.from_step}"
+
+
 def run_args(a: argparse.Namespace, scene: str, grid: str, out: Path) -> list[str]:
     """The ``run`` command line (after the script) that measures ``scene`` on ``grid`` alone
     with ``a``'s settings, its results in ``out``."""
@@ -381,6 +397,8 @@ def run_args(a: argparse.Namespace, scene: str, grid: str, out: Path) -> list[st
     args += ["--warmup", str(a.warmup), "--out", str(out)]
     if a.from_start:
         args.append("--from-start")
+    if a.from_step is not None:
+        args += ["--from-step", str(a.from_step)]
     if a.tight:
         args.append("--tight")
     if a.tolerances:
@@ -453,11 +471,18 @@ def parser() -> argparse.ArgumentParser:
             "'solver.electric_energy_tolerance=1e-4, mechanics.energy_tolerance=0.01' "
             "(repeatable)",
         )
-        r.add_argument(
+        start = r.add_mutually_exclusive_group()
+        start.add_argument(
             "--from-start",
             action="store_true",
             help="run: from the scene's first step (a whole run with --steps its steps) "
             "instead of two steps after the first cut",
+        )
+        start.add_argument(
+            "--from-step",
+            type=int,
+            metavar="N",
+            help="run: from the state after exactly N steps in the scene's own settings",
         )
     rp = sub.add_parser("report", help="rewrite a run's table and plots from its realtime.json")
     rp.add_argument("folder", type=Path, help="the run's --out folder")
@@ -484,13 +509,14 @@ def main() -> None:
         runs = {
             (n, g): measure(
                 scene_on(n, g),
-                CACHE / f"{n}_{g}{'_start' if a.from_start else ''}.h5",
+                CACHE / f"{n}_{g}{start_suffix(a)}.h5",
                 warmup=a.warmup,
                 steps=a.steps,
                 tight=a.tight,
                 tolerances=tuple(a.tolerances),
                 variants=tuple(a.variant),
                 from_start=a.from_start,
+                from_step=a.from_step,
             )
             for n in a.scenes
             for g in a.grids

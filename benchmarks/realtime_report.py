@@ -27,6 +27,8 @@ def command_line(a: argparse.Namespace) -> str:
     ]
     if getattr(a, "from_start", False):
         parts.append("--from-start")
+    if getattr(a, "from_step", None) is not None:
+        parts.append(f"--from-step {a.from_step}")
     if a.tight:
         parts.append("--tight")
     if a.tolerances:
@@ -67,10 +69,13 @@ def write_run(
     load = load or os.getloadavg()
     from_start = any(run.get("from_start") for run in runs.values())
     apart = all("tets_apart" in r for run in runs.values() for r in run["rec"].values())
+    later = sorted({run["from_step"] for run in runs.values() if run.get("from_step")})
     where = (
         "from its first step (a whole run: heating, the first vaporization and mechanics solve, "
         "the cut)"
         if from_start
+        else f"from its state after {' / '.join(map(str, later))} steps in its own settings"
+        if later
         else "checkpoint two steps after the first cut (or after the warm-up where it does not cut)"
     )
     lines = [
@@ -89,8 +94,10 @@ def write_run(
         "after the cut); *cut from*: the first measured step with a cut."
         + (
             " *Tets cut apart*: the most tets whose removed state differs from the full mode's "
-            "at one step, and on how many steps any does; *max T error, cut alike*: the max "
-            "temperature error over the steps where none does."
+            "at one step, on how many steps any does and the first such step; *max T error "
+            "before*: the max temperature error over the steps before that one (once one tet is "
+            "cut in one mode and not in the other, the current takes another path and the "
+            "temperatures part; the error decays by diffusion only after the cuts agree again)."
             if apart
             else ""
         ),
@@ -100,7 +107,7 @@ def write_run(
         "cut from | electric | thermal | mechanics | dissection | local mechanics steps | "
         "max SE error | mean SE error | max T error K | first step over 1 % SE / 0.1 K | "
         "cut volume vs full |"
-        + (" tets cut apart (steps) | max T error, cut alike K |" if apart else ""),
+        + (" tets cut apart (steps, first) | max T error before K |" if apart else ""),
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
         "---|" + ("---|---|" if apart else ""),
     ]
@@ -157,12 +164,15 @@ def write_run(
 
 def apart_cells(r: dict[str, list[float]]) -> str:
     """The two cut-agreement cells of a mode's row: the most tets whose removed state differs
-    from the full mode's at one step (and on how many steps any does), and the max temperature
-    error over the steps where none does (K)."""
+    from the full mode's at one step (on how many steps any does, and the first, 1-based), and
+    the max temperature error over the steps before that first one (K; every step if none)."""
     apart = np.asarray(r["tets_apart"])
-    alike = np.asarray(r["dT_k"])[apart == 0]
-    worst = f"{alike.max():.2e}" if alike.size else "-"
-    return f" {int(apart.max())} ({int(np.count_nonzero(apart))}) | {worst} |"
+    parted = np.flatnonzero(apart)
+    first = int(parted[0]) if parted.size else apart.size
+    before = np.asarray(r["dT_k"])[:first]
+    worst = f"{before.max():.2e}" if before.size else "-"
+    when = f", {first + 1}" if parted.size else ""
+    return f" {int(apart.max())} ({parted.size}{when}) | {worst} |"
 
 
 def read_run(folder: Path) -> tuple[dict, str, str, tuple[float, ...] | None]:

@@ -8,6 +8,7 @@ import json
 from pathlib import Path
 from types import ModuleType
 
+import numpy as np
 import pytest
 
 from tests.benchmarks.loading import load_benchmark
@@ -105,6 +106,10 @@ def test_each_scene_and_grid_runs_in_a_process_of_its_own(bench: ModuleType) -> 
     assert child.out == Path("x")
     for key in ("steps", "warmup", "from_start", "tight", "tolerances", "variant"):
         assert getattr(child, key) == getattr(a, key), key
+    a = bench.parser().parse_args(["run", "--scenes", "default", "--from-step", "90"])
+    child = bench.parser().parse_args(bench.run_args(a, "default", "own", Path("x")))
+    assert child.from_step == 90 and not child.from_start
+    assert bench.start_suffix(child) == "_step90" and bench.start_suffix(a) == "_step90"
     plain = bench.parser().parse_args(["run", "--scenes", "default"])
     child = bench.parser().parse_args(bench.run_args(plain, "default", "own", Path("y")))
     assert not child.from_start and not child.tight and child.tolerances == [] == child.variant
@@ -146,15 +151,28 @@ def test_whole_run_from_the_first_step(
     assert f"| {phase[0] + 1} |" in table  # the full mode's 'cut from' column
     assert "| - / - |" in table  # no step of the full mode is off itself
     assert rec["full"]["tets_apart"] == [0.0] * 30  # the full mode's cut is its own
-    assert "| tets cut apart (steps) | max T error, cut alike K |" in table
+    assert "| tets cut apart (steps, first) | max T error before K |" in table
     assert f"| 0 (0) | {max(rec['full']['dT_k']):.2e} |" in table
+    # --from-step 12: the checkpoint after exactly 12 steps in the scene's own (incremental)
+    # settings, so its incremental mode goes on as the whole run's did from there
+    later = bench.measure(tiny_scene(), tmp_path / "step12.h5", warmup=40, steps=4, from_step=12)
+    assert later["from_step"] == 12 and not later["from_start"]
+    np.testing.assert_allclose(
+        later["rec"]["incremental"]["cut_m3"], rec["incremental"]["cut_m3"][12:16], rtol=1e-12
+    )
+    args.from_start, args.from_step = False, 12
+    report.write_run({("tiny", "own"): later}, args, "now", out=tmp_path / "later")
+    table = (tmp_path / "later" / "realtime.md").read_text()
+    assert "--from-step 12" in table and "from its state after 12 steps" in table
     assert report.first_over([0.0, 0.02, 0.5], 0.01) == "2" and report.first_over([0.0], 1) == "-"
 
 
 def test_cut_agreement_cells_split_the_temperature_error(report: ModuleType) -> None:
-    """The steps where the cut differs from the full mode's are set apart from those where it
-    is alike: the worst temperature error of the latter, the most tets apart of the former."""
-    r = {"tets_apart": [0.0, 0.0, 3.0, 1.0, 0.0], "dT_k": [0.01, 0.02, 1.5, 0.9, 0.05]}
-    assert report.apart_cells(r) == " 3 (2) | 5.00e-02 |"
+    """The temperature error is split at the first step whose cut differs from the full mode's:
+    the worst before it (the local solves' own error), the most tets apart and when."""
+    r = {"tets_apart": [0.0, 0.0, 3.0, 1.0, 0.0], "dT_k": [0.01, 0.02, 1.5, 0.9, 5.0]}
+    assert report.apart_cells(r) == " 3 (2, 3) | 2.00e-02 |"  # 5 K after the cuts agree again
+    r = {"tets_apart": [0.0, 0.0], "dT_k": [0.01, 0.03]}
+    assert report.apart_cells(r) == " 0 (0) | 3.00e-02 |"
     r = {"tets_apart": [2.0], "dT_k": [0.7]}
-    assert report.apart_cells(r) == " 2 (1) | - |"
+    assert report.apart_cells(r) == " 2 (1, 1) | - |"
