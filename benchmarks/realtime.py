@@ -1,7 +1,7 @@
 """Real time (issue #25): what a cutting step costs, full against incremental, one command.
 
     python benchmarks/realtime.py run [--scenes NAME ...] [--grids own uniform] [--steps N] [--tight]
-        [--tolerances X ...] [--variant 'section.key=value, ...' ...] [--from-start]
+        [--tolerances X ...] [--variant 'section.key=value, ...' ...] [--from-start | --from-step N]
     python benchmarks/realtime.py report FOLDER   # a run's table and plots again from its json
     python benchmarks/realtime.py profile [--scenes default] [--grids own uniform] [--steps N]
     python benchmarks/realtime.py solvers [--grids 0 0.5] [--steps N] [--rounds N]
@@ -23,7 +23,10 @@ with ``--tolerances`` the incremental mode at each of those ``mechanics.energy_t
 mechanics.energy_tolerance=0.01'``). ``--from-start`` steps every mode from the scene's first
 step instead (a whole run when ``--steps`` is the scene's: the heating, the first vaporization and
 mechanics solve and the cut, where persistence has nothing or little to start from); the table
-then also gives each mode's cutting phase (the steps from its first cut on) on its own. Per mode: median, p90 and mean wall time per step,
+then also gives each mode's cutting phase (the steps from its first cut on) on its own.
+``--from-step N`` steps them from the state after exactly N steps in the scene's own settings
+(checkpointed as the warm-up is): a window of a whole run, e.g. around the step where two modes'
+cuts part, without paying the full mode for the steps before it. Per mode: median, p90 and mean wall time per step,
 the real-time factor (dt / median wall) and the sustained one (dt / mean wall), the median
 time of each effect, the mechanics' share of local steps, and against ``full`` at the same step the max and mean strain-energy error and
 the max temperature error, and the final cut-volume difference. Writes
@@ -498,6 +501,8 @@ def main() -> None:
     a = ap.parse_args()
     started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     if a.cmd == "run":
+        if a.from_step is not None and a.from_step < 0:
+            ap.error(f"--from-step: a step count, not {a.from_step}")
         for v in a.variant:  # a bad setting stops the run before any warm-up
             try:
                 parse_settings(v)

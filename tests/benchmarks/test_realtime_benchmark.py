@@ -115,6 +115,16 @@ def test_each_scene_and_grid_runs_in_a_process_of_its_own(bench: ModuleType) -> 
     assert not child.from_start and not child.tight and child.tolerances == [] == child.variant
 
 
+def test_a_negative_start_step_is_refused(
+    bench: ModuleType, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr("sys.argv", ["realtime.py", "run", "--from-step", "-3"])
+    with pytest.raises(SystemExit) as exc:
+        bench.main()
+    assert exc.value.code == 2
+    assert "--from-step: a step count, not -3" in capsys.readouterr().err
+
+
 def test_settings_are_parsed_or_refused(bench: ModuleType) -> None:
     assert bench.parse_settings(
         "solver.electric_energy_tolerance=1e-4, mechanics.guard=energy"
