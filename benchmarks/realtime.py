@@ -381,8 +381,8 @@ def profile(a: argparse.Namespace, started: str) -> None:
                     f"{tt / total:.0%} | {ct / a.steps:.3f} |"
                 )
             lines.append("")
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / "realtime_profile.md").write_text("\n".join(lines))
+    a.out.mkdir(parents=True, exist_ok=True)
+    (a.out / "realtime_profile.md").write_text("\n".join(lines))
     print("\n".join(lines))
 
 
@@ -451,7 +451,7 @@ def parser() -> argparse.ArgumentParser:
         r.add_argument("--steps", type=int, default=steps)
         r.add_argument("--warmup", type=int, default=60, help="steps at most before the cut")
         r.add_argument("--top", type=int, default=15, help="profile: functions listed")
-        r.add_argument("--out", type=Path, default=RESULTS, help="run: results folder")
+        r.add_argument("--out", type=Path, default=RESULTS, help="results folder")
         r.add_argument(
             "--tight",
             action="store_true",

@@ -186,3 +186,19 @@ def test_cut_agreement_cells_split_the_temperature_error(report: ModuleType) -> 
     assert report.apart_cells(r) == " 0 (0) | 3.00e-02 |"
     r = {"tets_apart": [2.0], "dT_k": [0.7]}
     assert report.apart_cells(r) == " 2 (1, 1) | - |"
+
+
+def test_the_profile_writes_where_it_is_told(
+    bench: ModuleType, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``profile --out`` writes its table there, not over the committed results."""
+    committed = bench.RESULTS / "realtime_profile.md"
+    before = committed.read_bytes() if committed.exists() else None
+    monkeypatch.setattr(bench, "scene_on", lambda name, grid: tiny_scene())
+    monkeypatch.setattr(bench, "CACHE", tmp_path / "cache")
+    out = tmp_path / "out"
+    args = argparse.Namespace(scenes=["default"], grids=["own"], steps=2, warmup=40, top=5, out=out)
+    bench.profile(args, "now")
+    text = (out / "realtime_profile.md").read_text()
+    assert "| function | calls |" in text and "2 steps" in text
+    assert (committed.read_bytes() if committed.exists() else None) == before

@@ -55,9 +55,12 @@ def test_graded_run_cuts_and_balances_energy(surface_m):
     assert key[2] < sim.ctx.top_z  # the disk follows the crater floor on the graded axes
 
 
-def test_graded_checkpoint_restores_bit_for_bit(tmp_path):
-    sim = Simulation(graded_scene())
+@pytest.mark.parametrize("history", [0, 3])
+def test_graded_checkpoint_restores_bit_for_bit(tmp_path, history):
+    """Also with the window's history (``mechanics.window_history``), saved with the state."""
+    sim = Simulation(graded_scene(mechanics={"window_history": history}))
     sim.run(12)
+    assert len(sim.ctx.mechanics.history) == history
     path = sim.save_checkpoint(tmp_path / "c.h5")
     saved = read_grid_attrs(path)
     assert all(np.array_equal(a, b) for a, b in zip(saved.axes(), sim.grid.axes(), strict=True))
@@ -83,6 +86,33 @@ def test_a_corrupt_polish_window_in_a_checkpoint_is_refused(tmp_path):
         f["solver/mechanics_window_box"] = box[:2]
     with pytest.raises(CheckpointError, match="mechanics window"):
         Simulation.load_checkpoint(path)
+
+
+def test_a_corrupt_window_history_in_a_checkpoint_is_refused(tmp_path):
+    import h5py
+
+    from diathermy.errors import CheckpointError
+
+    sim = Simulation(graded_scene(mechanics={"window_history": 2}))
+    sim.run(12)
+    path = sim.save_checkpoint(tmp_path / "c.h5")
+    for bad in ("shape", "nan"):
+        with h5py.File(path, "a") as f:
+            h = f["solver/mechanics_history"][()]
+            del f["solver/mechanics_history"]
+            f["solver/mechanics_history"] = h[:, :-1] if bad == "shape" else h * np.nan
+        with pytest.raises(CheckpointError, match="mechanics history"):
+            Simulation.load_checkpoint(path)
+        path = sim.save_checkpoint(tmp_path / "c.h5")
+    # a scene that keeps less history than was saved takes the newest
+    back = Simulation.load_checkpoint(
+        path,
+        scene=lambda s: s.model_copy(
+            update={"mechanics": s.mechanics.model_copy(update={"window_history": 1})}
+        ),
+    )
+    assert len(back.ctx.mechanics.history) == 1
+    assert np.array_equal(back.ctx.mechanics.history[0], sim.ctx.mechanics.history[0])
 
 
 def read_grid_attrs(path):

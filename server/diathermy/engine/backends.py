@@ -113,6 +113,7 @@ def make_backend(
             energy_tolerance=cfg.energy_tolerance,
             polish_iterations=cfg.polish_iterations,
             window_m=cfg.polish_window_m,
+            window_history=cfg.window_history,
             interval_tolerance=cfg.interval_tolerance,
         )
         if cfg.predictor != "auto":

@@ -186,6 +186,8 @@ def _hierarchy_state(ctx: EngineContext) -> dict[str, np.ndarray]:
         out["mechanics_since_full"] = np.asarray(backend.since_full)
         if backend.last_E_pa is not None:
             out["mechanics_last_E"] = backend.last_E_pa
+        if backend.history:
+            out["mechanics_history"] = np.stack(backend.history)
         if backend.window is not None:
             out["mechanics_window_box"] = backend.window.box.as_array()
             out["mechanics_window_E"] = backend.window.built_E
@@ -219,6 +221,18 @@ def _restore_hierarchies(ctx: EngineContext, solver: dict[str, np.ndarray]) -> N
         backend.since_full = int(solver["mechanics_since_full"])
         backend.last_E_pa = solver.get("mechanics_last_E")
         backend.windowed.window = None
+        n_nodes = ctx.disc.mesh.n_nodes
+        history = np.asarray(solver.get("mechanics_history", np.zeros((0, n_nodes, 3))))
+        if (
+            history.ndim != 3
+            or history.shape[1:] != (n_nodes, 3)
+            or not np.all(np.isfinite(history))
+        ):
+            raise CheckpointError(
+                f"checkpoint's mechanics history: finite (m, {n_nodes}, 3) displacements "
+                f"expected, got {history.shape}"
+            )
+        backend.history = [h.copy() for h in history[: backend.settings.window_history]]
         if "mechanics_window_box" in solver:
             box = np.asarray(solver["mechanics_window_box"])
             E = np.asarray(solver.get("mechanics_window_E", ()))

@@ -83,6 +83,13 @@ class IncrementalFEMBackend:
         self._forced: str | None = None
         self.last_E_pa: np.ndarray | None = None  # E per tet of the solve behind the warm start
         self.windowed = WindowedPolish(settings)
+        # the last answers (n_nodes, 3) m, newest first: the window's history (window_history)
+        self.history: list[np.ndarray] = []
+
+    def remember(self, u: np.ndarray) -> None:
+        """Keep ``u`` as the newest of the window's history (at most ``window_history``)."""
+        m = self.settings.window_history
+        self.history = [np.array(u, dtype=float)] + self.history[: m - 1] if m > 0 else []
 
     def force_full(self, why: str) -> None:
         """Solve the next step in full, saying ``why``."""
@@ -206,6 +213,7 @@ class IncrementalFEMBackend:
         loose = solver.fragments.loose
         previous_E, self.last_E_pa = self.last_E_pa, solver.youngs_modulus_pa
         extra.update(mode="full" if interval else "local")
+        self.remember(u)
         return MechanicsOutput(
             u=u,
             iterations=iterations,
@@ -271,7 +279,7 @@ class IncrementalFEMBackend:
                 else "energy guard"
             )
             u_window, r_window, window_nodes = self.windowed.correct(
-                solver, f, local.u, local.Ku, local.patch_nodes, extra
+                solver, f, local.u, local.Ku, local.patch_nodes, extra, self.history
             )
             polished = self._polish(solver, f, u_window, r_window, interval=bool(interval))
             if polished is not None:
@@ -302,7 +310,7 @@ class IncrementalFEMBackend:
                     moved = None
                     if polished.iterations == 0:  # the window's answer as it is
                         u = u_window
-                        if persistence:
+                        if persistence and window_nodes is not None:
                             moved = np.union1d(local.patch_nodes, window_nodes)
                     else:
                         u = (polished.x * solver.scale).reshape(-1, 3)
@@ -329,6 +337,7 @@ class IncrementalFEMBackend:
         self.n_full += 1
         self._forced = None
         self.last_E_pa = self.fem.solver.youngs_modulus_pa if self.fem.solver else None
+        self.remember(out.u)
         if extra["predictor"] == "none" and x0 is not None and np.any(x0):
             extra["predictor"] = "previous"  # CG started from the last displacement
         return MechanicsOutput(

@@ -45,6 +45,11 @@ fraction of the FEM tolerance's iterations (docs/realtime.md). 0: the FEM solve 
 tolerance."""
 INTERVAL_MAX_ITERATIONS = 150
 """PCG iterations the interval's global solve may take before the FEM solve takes over."""
+DEFAULT_WINDOW_HISTORY = 0
+"""Past displacements the windowed polish adds to its window (``polish_window``): 0, the window
+alone."""
+MAX_WINDOW_HISTORY = 16
+"""The most past displacements the window may be augmented with (each is a global vector)."""
 WINDOW_MAX_FRACTION = 0.25
 """The window holds at most this share of the nodes (its margin is halved until it does)."""
 Guard = Literal["residual", "energy"]
@@ -68,6 +73,7 @@ class IncrementalSettings:
     window_m: float = DEFAULT_WINDOW_M  # the windowed polish's margin; 0: none
     window_iterations: int = 30
     window_share: float = 0.3  # the window's tolerance: this x energy_tolerance
+    window_history: int = DEFAULT_WINDOW_HISTORY  # past displacements solved for with the window
     interval_tolerance: float = DEFAULT_INTERVAL_TOLERANCE  # 0: the interval solves FEM-tight
 
     def __post_init__(self) -> None:
@@ -79,6 +85,8 @@ class IncrementalSettings:
             raise ValueError(
                 "window_m must be >= 0, window_iterations >= 1, window_share in (0, 1]"
             )
+        if not 0 <= self.window_history <= MAX_WINDOW_HISTORY:
+            raise ValueError(f"window_history must lie in [0, {MAX_WINDOW_HISTORY}]")
         if not 0 <= self.interval_tolerance < 1:
             raise ValueError("interval_tolerance must lie in [0, 1)")
         if self.guard not in ("residual", "energy"):

@@ -9,11 +9,20 @@ cost instead of the block's; the global energy guard (``fem.energy_cg``) still d
 the answer is accepted. The window and its AMG hierarchy are kept while the change stays inside
 its inner box (a new hierarchy costs a few global V-cycles), like the global hierarchy is kept
 across topologies: a stale preconditioner only slows PCG.
+
+What the window cannot reach is the far field: the nodes it holds keep the Ritz-scaled last
+displacement, whose shape there is not the new one's. With ``window_history`` m > 0 the
+correction is sought in the window's DOFs *and* the span of the last m displacements (global
+vectors), jointly: PCG on the coupled system [[A_WW, (AZ)_W], [(AZ)_W^T, I]] with Z the
+A-orthonormalised history, preconditioned by the window's V-cycle and the identity. The minimum
+over the larger space can only be lower; the far field then follows the history's
+shapes (docs/realtime.md, *The window and the history*).
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -148,6 +157,91 @@ def window_correct(
     )
 
 
+HISTORY_CUTOFF = 1e-10
+"""Directions of the history whose energy is below this x the largest are dropped (the past
+displacements are nearly parallel: the Gram matrix is ill-conditioned)."""
+
+
+@dataclass(frozen=True)
+class History:
+    """The past displacements in the scaled system, A-orthonormal: Z (n_dofs, k) and A Z."""
+
+    Z: np.ndarray
+    AZ: np.ndarray
+
+    @classmethod
+    def of(
+        cls,
+        A: sp.spmatrix,
+        scale: np.ndarray,
+        displacements: Sequence[np.ndarray],
+        window: PolishWindow | None = None,
+    ) -> History:
+        """Z spanning the displacements (each (n_nodes, 3) m) seen through the scaling
+        x = u / scale; one block product. With ``window``, their values on its DOFs are
+        dropped first: the window's own DOFs span those, and without them Z couples to the
+        window only across its boundary (the coupled PCG converges in about the window's
+        iterations, not 2-3x them)."""
+        Y = np.stack([np.ravel(u) / scale for u in displacements], axis=1)
+        AY = np.asarray(A @ Y)
+        if window is not None:
+            dofs = window.dofs
+            for j in range(Y.shape[1]):
+                AY[:, j] -= window.spread(A, Y[dofs, j])
+            Y[dofs] = 0.0
+        G = Y.T @ AY
+        w, V = np.linalg.eigh(0.5 * (G + G.T))
+        keep = w > HISTORY_CUTOFF * max(float(w.max()), 0.0)
+        T = V[:, keep] / np.sqrt(w[keep])
+        return cls(Y @ T, AY @ T)
+
+    @property
+    def size(self) -> int:
+        return int(self.Z.shape[1])
+
+
+def augmented_correct(
+    window: PolishWindow,
+    A: sp.bsr_matrix,
+    history: History,
+    residual: np.ndarray,
+    norm_sq: float,
+    *,
+    tol: float,
+    maxiter: int,
+) -> tuple[EnergyCG, np.ndarray]:
+    """``window_correct`` over the window's DOFs and the history's span together: PCG on the
+    coupled system from zero; (the PCG result for the window's part, the history's
+    coefficients c, so that the correction is delta_W + Z c)."""
+    dofs = window.dofs
+    n_w, k = dofs.size, history.size
+    Aw = window.matrix(A)
+    AZ_w = history.AZ[dofs]
+    M_w = window.preconditioner
+
+    def apply(v: np.ndarray) -> np.ndarray:
+        d, c = v[:n_w], v[n_w:]
+        return np.concatenate([Aw @ d + AZ_w @ c, AZ_w.T @ d + c])
+
+    def precondition(v: np.ndarray) -> np.ndarray:
+        return np.concatenate([M_w @ v[:n_w], v[n_w:]])
+
+    shape = (n_w + k, n_w + k)
+    res = energy_cg(
+        spla.LinearOperator(shape, matvec=apply, dtype=float),
+        np.concatenate([residual[dofs], history.Z.T @ residual]),
+        np.zeros(n_w + k),
+        spla.LinearOperator(shape, matvec=precondition, dtype=float),
+        tol=tol,
+        maxiter=maxiter,
+        norm_sq=norm_sq,
+    )
+    return (
+        EnergyCG(res.x[:n_w], res.iterations, res.estimate, res.residual),
+        res.x[n_w:],
+    )
+
+
 class WindowedPolish:
     """An incremental backend's windowed polish: its kept window and the PCG on it
     (``IncrementalSettings.window_m`` and the window knobs)."""
@@ -164,12 +258,14 @@ class WindowedPolish:
         Ku: np.ndarray | None,
         change: np.ndarray,
         extra: dict[str, float | int | bool | str],
-    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        history: Sequence[np.ndarray] = (),
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
         """u (n_nodes, 3) m corrected by PCG on a window around the nodes ``change`` (the
         patch), the rest held (bit for bit), its residual on the scaled system (None: not
         known) and the window's nodes; u as is (and no nodes) when there is no window to solve
         on. ``Ku``: K u (n_nodes, 3) N when known, f the load (n_nodes, 3) N; what it did goes
-        into ``extra``."""
+        into ``extra``. ``history``: past displacements (n_nodes, 3) m whose span is solved
+        for with the window (``augmented_correct``); u then moves everywhere (nodes None)."""
         A = solver.krylov.A
         st = self.settings
         if (
@@ -196,20 +292,36 @@ class WindowedPolish:
         # the scaled residual s (f - K u) from the patch's K u: no global mat-vec
         r = b - A @ x0 if Ku is None else s * (f.ravel() - Ku.ravel())
         tol = st.window_share * st.energy_tolerance
-        res = window_correct(w, A, r, float(x0 @ (b - r)), tol=tol, maxiter=st.window_iterations)
+        norm_sq = float(x0 @ (b - r))
+        hist = History.of(A, s, history, w) if len(history) else None
+        if hist is None or hist.size == 0:
+            res = window_correct(w, A, r, norm_sq, tol=tol, maxiter=st.window_iterations)
+            c = None
+        else:
+            res, c = augmented_correct(
+                w, A, hist, r, norm_sq, tol=tol, maxiter=st.window_iterations
+            )
         if res.estimate > tol:
             self.window = None  # stale for this change: the next step builds a new one
         dofs = w.dofs
-        corrected = u.ravel().copy()
-        corrected[dofs] = (x0[dofs] + res.x) * s[dofs]
+        x = x0.copy()
+        x[dofs] += res.x
+        r_new = r - w.spread(A, res.x)
+        if c is not None and hist is not None:
+            x += hist.Z @ c
+            r_new -= hist.AZ @ c
+        corrected = x * s if c is not None else u.ravel().copy()
+        if c is None:
+            corrected[dofs] = x[dofs] * s[dofs]
         extra.update(
             window_nodes=int(w.nodes.size),
             window_built=built,
             window_iterations=res.iterations,
             window_estimate=res.estimate,
+            window_history=0 if hist is None else hist.size,
             window_s=time.perf_counter() - t0,
         )
-        return corrected.reshape(-1, 3), r - w.spread(A, res.x), w.nodes
+        return corrected.reshape(-1, 3), r_new, w.nodes if c is None else None
 
     def build(self, solver: MechanicsSolver, box: WindowBox) -> PolishWindow:
         """A new window on ``box`` for ``solver``'s operator, kept as ``self.window``."""

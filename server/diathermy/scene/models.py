@@ -214,6 +214,12 @@ class MechanicsConfig(_Model):
         "the nodes), the rest held, with its own kept AMG hierarchy; the global energy check "
         "follows (0: no window, the whole block)",
     )
+    window_history: Annotated[int, Field(ge=0, le=16)] = Field(
+        0,
+        description="fem, incremental: the window's PCG also solves for a combination of the "
+        "last this many displacements (global vectors, one block product a step), so that the "
+        "far field the window holds follows the run's own shapes (0: the window alone)",
+    )
     correction: Literal["none", "patch"] = Field(
         "patch",
         description="cnn and fem-previous/auto: 'patch' solves equilibrium exactly on the nodes "
