@@ -189,3 +189,24 @@ def test_the_history_lowers_the_error_below_the_windows_best(case):
     np.testing.assert_allclose(hist.Z.T @ hist.AZ, np.eye(2), atol=1e-9)
     np.testing.assert_allclose(hist.AZ, A @ hist.Z, atol=1e-9 * np.abs(hist.AZ).max())
     assert np.all(hist.Z[w.dofs] == 0.0)  # the window's DOFs span that part
+
+
+def test_the_history_takes_a_known_product(case):
+    """A product the caller has (the Ritz start's K u) stands for the block product's column."""
+    solver, local, A, _, _ = case
+    s = solver.scale
+    pts = solver.mesh.points
+    w = build_window(
+        A, None, pts, choose_box(pts, local.patch_nodes, 0.004, solver.mesh.n_nodes),
+        DEFAULT_AMG_OPTIONS, solver.youngs_modulus_pa, solver.healthy,
+    )  # fmt: skip
+    shapes = [local.u, 0.5 * local.u + 1e-6]
+    shapes[1][solver.constrained.reshape(-1, 3)] = 0.0
+    known = History.of(A, s, shapes, w, first_product=s * (solver.K @ local.u.ravel()))
+    computed = History.of(A, s, shapes, w)
+    v = np.random.default_rng(2).standard_normal(A.shape[0])
+    for h in (known, computed):  # the A-orthogonal projection on the span, sign-free
+        np.testing.assert_allclose(h.Z.T @ h.AZ, np.eye(h.size), atol=1e-9)
+    np.testing.assert_allclose(
+        known.Z @ (known.AZ.T @ v), computed.Z @ (computed.AZ.T @ v), rtol=1e-7, atol=1e-12
+    )

@@ -176,14 +176,22 @@ class History:
         scale: np.ndarray,
         displacements: Sequence[np.ndarray],
         window: PolishWindow | None = None,
+        first_product: np.ndarray | None = None,
     ) -> History:
         """Z spanning the displacements (each (n_nodes, 3) m) seen through the scaling
-        x = u / scale; one block product. With ``window``, their values on its DOFs are
-        dropped first: the window's own DOFs span those, and without them Z couples to the
-        window only across its boundary (the coupled PCG converges in about the window's
-        iterations, not 2-3x them)."""
+        x = u / scale; one block product (``first_product``: A x of the first when the caller
+        has it, e.g. from the Ritz-scaled start, so the product has one column fewer). With
+        ``window``, their values on its DOFs are dropped first: the window's own DOFs span
+        those, and without them Z couples to the window only across its boundary (the coupled
+        PCG then converges in about the window's iterations; kept whole, 2-3x them)."""
         Y = np.stack([np.ravel(u) / scale for u in displacements], axis=1)
-        AY = np.asarray(A @ Y)
+        if first_product is None:
+            AY = np.asarray(A @ Y)
+        else:
+            AY = np.empty_like(Y)
+            AY[:, 0] = np.ravel(first_product)
+            if Y.shape[1] > 1:
+                AY[:, 1:] = np.asarray(A @ Y[:, 1:])
         if window is not None:
             dofs = window.dofs
             for j in range(Y.shape[1]):
@@ -259,13 +267,15 @@ class WindowedPolish:
         change: np.ndarray,
         extra: dict[str, float | int | bool | str],
         history: Sequence[np.ndarray] = (),
+        K_newest: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
         """u (n_nodes, 3) m corrected by PCG on a window around the nodes ``change`` (the
         patch), the rest held (bit for bit), its residual on the scaled system (None: not
         known) and the window's nodes; u as is (and no nodes) when there is no window to solve
         on. ``Ku``: K u (n_nodes, 3) N when known, f the load (n_nodes, 3) N; what it did goes
         into ``extra``. ``history``: past displacements (n_nodes, 3) m whose span is solved
-        for with the window (``augmented_correct``); u then moves everywhere (nodes None)."""
+        for with the window (``augmented_correct``); u then moves everywhere (nodes None).
+        ``K_newest``: K times the newest of them (n_nodes, 3) N when known."""
         A = solver.krylov.A
         st = self.settings
         if (
@@ -293,7 +303,8 @@ class WindowedPolish:
         r = b - A @ x0 if Ku is None else s * (f.ravel() - Ku.ravel())
         tol = st.window_share * st.energy_tolerance
         norm_sq = float(x0 @ (b - r))
-        hist = History.of(A, s, history, w) if len(history) else None
+        first = None if K_newest is None else s * K_newest.ravel()
+        hist = History.of(A, s, history, w, first) if len(history) else None
         if hist is None or hist.size == 0:
             res = window_correct(w, A, r, norm_sq, tol=tol, maxiter=st.window_iterations)
             c = None

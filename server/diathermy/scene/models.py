@@ -218,7 +218,10 @@ class MechanicsConfig(_Model):
         0,
         description="fem, incremental: the window's PCG also solves for a combination of the "
         "last this many displacements (global vectors, one block product a step), so that the "
-        "far field the window holds follows the run's own shapes (0: the window alone)",
+        "far field the window holds follows the run's own shapes: on the fixed electrode's "
+        "0.4 mm grid the global polish then took 0-1 PCG iterations instead of 4-12, but a "
+        "100-step run left the full solve's trajectory at step 96 (0: the window alone, the "
+        "default)",
     )
     correction: Literal["none", "patch"] = Field(
         "patch",
