@@ -189,6 +189,9 @@ def test_the_history_lowers_the_error_below_the_windows_best(case):
     np.testing.assert_allclose(hist.Z.T @ hist.AZ, np.eye(2), atol=1e-9)
     np.testing.assert_allclose(hist.AZ, A @ hist.Z, atol=1e-9 * np.abs(hist.AZ).max())
     assert np.all(hist.Z[w.dofs] == 0.0)  # the window's DOFs span that part
+    held = solver.constrained
+    lifted = [local.u + 1e-6]  # a (corrupt) history that moves held DOFs: they stay held
+    assert np.all(History.of(A, s, lifted, w, constrained=held).Z[held] == 0.0)
 
 
 def test_the_history_takes_a_known_product(case):

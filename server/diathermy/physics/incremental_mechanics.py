@@ -146,18 +146,16 @@ class IncrementalFEMBackend:
         u_prev = warm_start if start.name == "previous" else None
         return local_solve(solver, start, f, self._graph, self.settings, u_prev)
 
-    def _newest_product(
-        self, solver: MechanicsSolver, start: Start, warm_start: np.ndarray | None
-    ) -> np.ndarray | None:
-        """K times the newest history entry (n_nodes, 3) N, from the Ritz-scaled start when
-        that started from it (None: the window's history computes it)."""
+    def _newest_product(self, start: Start, warm_start: np.ndarray | None) -> np.ndarray | None:
+        """K times the newest history entry (n_nodes, 3) N, its constrained values zeroed as the
+        history's are, from the Ritz-scaled start when that started from it (None: the
+        window's history computes it)."""
         if (
             start.name != "previous"
             or start.ritz_scale == 0
             or not self.history
             or warm_start is None
             or not np.array_equal(self.history[0], warm_start)
-            or np.any(warm_start[solver.constrained.reshape(-1, 3)])  # the start zeroed them
         ):
             return None
         return start.Ku / start.ritz_scale
@@ -296,7 +294,7 @@ class IncrementalFEMBackend:
             )
             u_window, r_window, window_nodes = self.windowed.correct(
                 solver, f, local.u, local.Ku, local.patch_nodes, extra, self.history,
-                self._newest_product(solver, start, warm_start),
+                self._newest_product(start, warm_start),
             )  # fmt: skip
             polished = self._polish(solver, f, u_window, r_window, interval=bool(interval))
             if polished is not None:

@@ -177,14 +177,19 @@ class History:
         displacements: Sequence[np.ndarray],
         window: PolishWindow | None = None,
         first_product: np.ndarray | None = None,
+        constrained: np.ndarray | None = None,
     ) -> History:
         """Z spanning the displacements (each (n_nodes, 3) m) seen through the scaling
         x = u / scale; one block product (``first_product``: A x of the first when the caller
         has it, e.g. from the Ritz-scaled start, so the product has one column fewer). With
         ``window``, their values on its DOFs are dropped first: the window's own DOFs span
         those, and without them Z couples to the window only across its boundary (the coupled
-        PCG then converges in about the window's iterations; kept whole, 2-3x them)."""
+        PCG then converges in about the window's iterations; kept whole, 2-3x them).
+        ``constrained`` (n_dofs,) bool: DOFs held at zero, zeroed in Z (an answer satisfies
+        that already; a product passed in must then be of the zeroed vector)."""
         Y = np.stack([np.ravel(u) / scale for u in displacements], axis=1)
+        if constrained is not None:
+            Y[constrained] = 0.0
         if first_product is None:
             AY = np.asarray(A @ Y)
         else:
@@ -304,7 +309,7 @@ class WindowedPolish:
         tol = st.window_share * st.energy_tolerance
         norm_sq = float(x0 @ (b - r))
         first = None if K_newest is None else s * K_newest.ravel()
-        hist = History.of(A, s, history, w, first) if len(history) else None
+        hist = History.of(A, s, history, w, first, solver.constrained) if len(history) else None
         if hist is None or hist.size == 0:
             res = window_correct(w, A, r, norm_sq, tol=tol, maxiter=st.window_iterations)
             c = None
@@ -315,15 +320,15 @@ class WindowedPolish:
         if res.estimate > tol:
             self.window = None  # stale for this change: the next step builds a new one
         dofs = w.dofs
-        x = x0.copy()
-        x[dofs] += res.x
         r_new = r - w.spread(A, res.x)
-        if c is not None and hist is not None:
-            x += hist.Z @ c
+        if c is None or hist is None:  # the rest held, bit for bit
+            corrected = u.ravel().copy()
+            corrected[dofs] = (x0[dofs] + res.x) * s[dofs]
+        else:
+            x = x0 + hist.Z @ c
+            x[dofs] += res.x
+            corrected = x * s
             r_new -= hist.AZ @ c
-        corrected = x * s if c is not None else u.ravel().copy()
-        if c is None:
-            corrected[dofs] = x[dofs] * s[dofs]
         extra.update(
             window_nodes=int(w.nodes.size),
             window_built=built,
