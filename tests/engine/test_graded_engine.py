@@ -88,6 +88,28 @@ def test_a_corrupt_polish_window_in_a_checkpoint_is_refused(tmp_path):
         Simulation.load_checkpoint(path)
 
 
+def test_with_the_history_the_strain_energy_is_the_answers():
+    """The history moves the answer everywhere: its strain energy is recomputed, not the
+    Ritz-scaled last one updated on the window's tets."""
+    from diathermy.physics.strain_energy import strain_energy_density
+
+    # a loose guard, so that the window's answer stands without global iterations: the path
+    # where the strain energy of the Ritz-scaled last answer would otherwise be updated
+    sim = Simulation(graded_scene(mechanics={"window_history": 3, "energy_tolerance": 0.05}))
+    used = []
+    for _ in range(20):
+        x = sim.step().effects["mechanics"].extra
+        used.append(x.get("window_history", 0) > 0 and x.get("polish_iterations") == 0)
+    assert any(used)
+    be = sim.ctx.mechanics.fem
+    solver = be.solver
+    W = strain_energy_density(
+        sim.ctx.disc.geom.grads, sim.ctx.disc.mesh.tets, sim.state["displacement"],
+        solver.youngs_modulus_pa, solver.poisson_ratio,
+    )  # fmt: skip
+    np.testing.assert_allclose(sim.state["strain_energy"], W, rtol=1e-9, atol=1e-12 * W.max())
+
+
 def test_a_corrupt_window_history_in_a_checkpoint_is_refused(tmp_path):
     import h5py
 

@@ -13,15 +13,14 @@ import scipy.sparse.linalg as spla
 from diathermy.physics.local_solve import IncrementalSettings
 from diathermy.physics.mechanics import DEFAULT_AMG_OPTIONS
 from diathermy.physics.polish_window import (
-    History,
     WindowBox,
-    augmented_correct,
     block_submatrix_plan,
     build_window,
     choose_box,
     nodes_in_box,
     window_correct,
 )
+from diathermy.physics.window_history import History, augmented_correct
 from tests.physics.test_incremental_mechanics import P0, _local, _setup
 
 
