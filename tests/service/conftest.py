@@ -132,7 +132,7 @@ def running(pid: int) -> bool:
     """Whether ``pid`` is a live process (neither gone nor a zombie)."""
     try:
         stat = Path(f"/proc/{pid}/stat").read_text()
-    except FileNotFoundError:
+    except (FileNotFoundError, ProcessLookupError):  # gone, or reaped while being read (ESRCH)
         return False
     return stat.rsplit(")", 1)[1].split()[0] != "Z"
 
