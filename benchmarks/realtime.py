@@ -74,6 +74,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from pydantic import ValidationError
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "server"))
@@ -241,6 +242,22 @@ def parse_settings(spec: str) -> dict[str, dict[str, Any]]:
     if not out:
         raise ValueError(f"variant {spec!r} sets nothing")
     return out
+
+
+def check_settings(spec: str, scenes: list[str]) -> None:
+    """Parse ``spec`` and apply it to each built-in scene named; a setting the scene model
+    refuses (an unknown key, a value out of range) raises ValueError naming it."""
+    settings = parse_settings(spec)
+    for name in scenes:
+        data = builtin_scene(name).model_dump()
+        for section, values in settings.items():
+            data[section].update(values)
+        try:
+            Scene.model_validate(data)
+        except ValidationError as e:
+            err = e.errors()[0]
+            where = ".".join(str(p) for p in err["loc"])
+            raise ValueError(f"variant {spec!r}: {where}: {err['msg']}") from None
 
 
 def modes_for(
@@ -505,7 +522,7 @@ def main() -> None:
             ap.error(f"--from-step: a step count, not {a.from_step}")
         for v in a.variant:  # a bad setting stops the run before any warm-up
             try:
-                parse_settings(v)
+                check_settings(v, a.scenes)
             except ValueError as e:
                 ap.error(str(e))
         if len(a.scenes) * len(a.grids) > 1:

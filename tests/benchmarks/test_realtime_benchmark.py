@@ -137,6 +137,30 @@ def test_settings_are_parsed_or_refused(bench: ModuleType) -> None:
             bench.parse_settings(bad)
 
 
+@pytest.mark.parametrize(
+    ("spec", "message"),
+    [
+        ("mechanics.window_m=0.01", "mechanics.window_m: Extra inputs are not permitted"),
+        ("mechanics.window_history=40", "mechanics.window_history: Input should be less than"),
+    ],
+)
+def test_a_setting_the_scene_refuses_stops_the_run_at_once(
+    bench: ModuleType,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    spec: str,
+    message: str,
+) -> None:
+    """An unknown key or a value out of range is a one-line usage error before any warm-up."""
+    argv = ["realtime.py", "run", "--scenes", "default", "--variant", spec]
+    monkeypatch.setattr("sys.argv", argv)
+    with pytest.raises(SystemExit) as exc:
+        bench.main()
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+
+
 def test_whole_run_from_the_first_step(
     bench: ModuleType, report: ModuleType, tmp_path: Path
 ) -> None:
