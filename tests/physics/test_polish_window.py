@@ -10,6 +10,7 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from diathermy.fem.energy_cg import energy_cg
 from diathermy.physics.local_solve import IncrementalSettings
 from diathermy.physics.mechanics import DEFAULT_AMG_OPTIONS
 from diathermy.physics.polish_window import (
@@ -94,6 +95,44 @@ def test_window_correction_lowers_the_global_error_to_the_windows_best(case):
     assert whole.nodes.size == n
     res = window_correct(whole, A, r, norm_sq, tol=1e-9, maxiter=200)
     assert _energy_error(A, x0 + res.x, x_true) < 1e-6
+
+
+def test_the_v_cycle_smooths_the_operator_it_is_asked_to_solve(case):
+    """A window kept while the operator changes (a cut: the stiffness of a few tets drops)
+    takes each step's block as its V-cycle's fine level: bit for bit that block, and PCG
+    converges faster than with the block the hierarchy was built for."""
+    solver, local, A, b, _ = case
+    pts, n = solver.mesh.points, solver.mesh.n_nodes
+    w = build_window(
+        A, solver.krylov.near_nullspace, pts, choose_box(pts, local.patch_nodes, 0.01, n),
+        DEFAULT_AMG_OPTIONS, solver.youngs_modulus_pa, solver.healthy,
+    )  # fmt: skip
+    built = w.hierarchy.levels[0].A
+    # soften the coupling of half the window's nodes 100-fold (same pattern, still SPD: the
+    # scaled operator of a block whose stiffness dropped there), stiffen its diagonal a little
+    A2 = A.copy()
+    rows = np.repeat(np.arange(n), np.diff(A.indptr))
+    soft = np.zeros(n, dtype=bool)
+    soft[w.nodes[: w.nodes.size // 2]] = True
+    off = rows != A.indices
+    A2.data[off & soft[rows] & soft[A.indices]] *= 1e-2
+    diag = ~off
+    A2.data[diag & soft[rows]] *= 1.0 + 1e-3
+    x_true = spla.spsolve(A2.tocsc(), b)
+    r = b - A2 @ (0.9 * x_true)
+    norm_sq = float(x_true @ (A2 @ x_true))
+    res = window_correct(w, A2, r, norm_sq, tol=1e-8, maxiter=200)
+    fine = w.hierarchy.levels[0].A
+    assert fine is not built
+    assert np.array_equal(fine.data, w.matrix(A2).data)
+    assert np.array_equal(fine.indices, w.matrix(A2).indices)
+    w.hierarchy.levels[0].A = built  # the V-cycle as it was built: PCG on the new block
+    stale = energy_cg(
+        w.matrix(A2), r[w.dofs], np.zeros(w.dofs.size), w.preconditioner,
+        tol=1e-8, maxiter=200, norm_sq=norm_sq,
+    )  # fmt: skip
+    assert res.estimate <= 1e-8 and stale.estimate <= 1e-8
+    assert res.iterations < stale.iterations
 
 
 def test_the_box_grows_with_the_change_and_keeps_its_node_budget():

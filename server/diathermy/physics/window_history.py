@@ -23,8 +23,8 @@ from diathermy.fem.energy_cg import EnergyCG, energy_cg
 
 
 class PolishWindow(Protocol):
-    """What the history needs of ``polish_window.PolishWindow``: its DOFs, its block of A, the
-    product of A with a vector on its DOFs, and its V-cycle."""
+    """What the history needs of ``polish_window.PolishWindow``: its DOFs, its block of A (as
+    the fine level of its V-cycle), the product of A with a vector on its DOFs, and its V-cycle."""
 
     @property
     def dofs(self) -> np.ndarray: ...
@@ -32,7 +32,7 @@ class PolishWindow(Protocol):
     @property
     def preconditioner(self) -> spla.LinearOperator: ...
 
-    def matrix(self, A: sp.bsr_matrix) -> sp.bsr_matrix: ...
+    def operator(self, A: sp.bsr_matrix) -> sp.bsr_matrix: ...
 
     def spread(self, A: sp.bsr_matrix, delta: np.ndarray) -> np.ndarray: ...
 
@@ -108,7 +108,7 @@ def augmented_correct(
     coefficients c, so that the correction is delta_W + Z c)."""
     dofs = window.dofs
     n_w, k = dofs.size, history.size
-    Aw = window.matrix(A)
+    Aw = window.operator(A)
     AZ_w = history.AZ[dofs]
     M_w = window.preconditioner
 
