@@ -15,7 +15,8 @@ turn, so that other load on a shared machine hits them alike): ``full`` (``solve
 false: every effect solved in full every step, the reference), ``incremental`` (the default:
 the mechanics from the previous displacement, Ritz-scaled, patch-corrected, a full solve when
 the residual check or the interval asks for it) and, on the uniform grid that has a shipped
-model, ``cnn`` (the CNN predictor with its patch); with ``--tight`` also the incremental mode
+model, ``cnn`` (the CNN predictor with its patch), and where the scene has mechanics
+``persistence`` (the trivial baseline: the last displacement, Ritz-scaled, as the answer); with ``--tight`` also the incremental mode
 without its windowed polish (``TIGHT_MODE``: every polish iteration over the whole block), and
 with ``--tolerances`` the incremental mode at each of those ``mechanics.energy_tolerance`` values
 (what a looser guard buys and costs), with each ``--variant`` the incremental mode with those
@@ -202,7 +203,16 @@ MODES: dict[str, dict[str, Any]] = {
     "full": {"incremental": False},
     "incremental": {},
     "cnn": {"backend": "cnn"},
+    "persistence": {
+        "guard": "residual",
+        "guard_tolerance": 0.99,
+        "correction": "none",
+        "full_every": 10000,
+    },
 }
+"""The modes, as mechanics settings. ``persistence`` is the trivial baseline every approximation
+is read against: the last displacement, Ritz-scaled, taken as the step's answer (solved only where
+there is none yet, the first mechanics step, or its relative residual passes 0.99)."""
 TIGHT_MODE = "incremental, block polish"
 """``--tight``: the incremental mode without its windowed polish (``mechanics.polish_window_m``
 0, as before 2026-12-03 10:00: every polish iteration over the whole block), beside the default."""
@@ -274,7 +284,8 @@ def modes_for(
     cnn = mech and scene.resolution is None and tuple(scene.grid) == UNIFORM
     extra = ([TIGHT_MODE] if tight else []) + [f"{TOLERANCE_MODE}{t:g}" for t in tolerances]
     settings = [f"{SETTINGS_MODE}{v}" for v in variants]
-    return [m for m in MODES if m != "cnn" or cnn] + (extra if mech else []) + settings
+    base = [m for m in MODES if (m != "cnn" or cnn) and (m != "persistence" or mech)]
+    return base + (extra if mech else []) + settings
 
 
 def load_mode(path: Path, mode: str) -> Simulation:

@@ -27,7 +27,8 @@ def report() -> ModuleType:
 
 def test_tiny_run_writes_its_table(bench: ModuleType, report: ModuleType, tmp_path: Path) -> None:
     scene = tiny_scene()
-    assert bench.modes_for(scene) == ["full", "incremental"]  # no model for a 9x9x17 grid
+    # no model for a 9x9x17 grid; persistence wherever there is mechanics
+    assert bench.modes_for(scene) == ["full", "incremental", "persistence"]
     assert bench.modes_for(bench.scene_on("coagulation", "uniform")) == ["full", "incremental"]
     assert bench.modes_for(scene, tight=True)[-1] == bench.TIGHT_MODE
     loose = f"{bench.TOLERANCE_MODE}0.01"
@@ -49,6 +50,9 @@ def test_tiny_run_writes_its_table(bench: ModuleType, report: ModuleType, tmp_pa
     assert rec["full"]["se_err"] == [0.0] * 4 and rec["full"]["local"] == [0.0] * 4
     for mode in ("incremental", bench.TIGHT_MODE, loose, settings):
         assert max(rec[mode]["se_err"]) <= 0.01 and max(rec[mode]["dT_k"]) <= 0.1
+    # the baseline solves nothing once it has a displacement, and the incremental mode corrects it
+    assert rec["persistence"]["local"] == [1.0] * 4
+    assert max(rec["persistence"]["se_err"]) > max(rec["incremental"]["se_err"])
     sim = bench.load_mode(tmp_path / "tiny.h5", loose)
     assert sim.scene.mechanics.energy_tolerance == 1e-2
     sim = bench.load_mode(tmp_path / "tiny.h5", settings)  # both sections set, the rest kept
