@@ -9,7 +9,8 @@ to ``rtol``; only its speed can suffer (graded 0.5 mm mechanics, a cut grown fro
 tets: 30-32 CG iterations against 30 with a fresh hierarchy and 36-40 with the old one as is). Each solve with an outdated hierarchy measures its convergence rate (digits of
 residual per iteration, so warm starts do not flatter it) against the rate right after the
 build; once it is ``stale_factor`` times slower, or after ``max_stale_solves`` such solves, the
-next solve rebuilds. Every solve checks the true residual of the operator it was given and
+next solve rebuilds. With ``refresh_coarse`` the coarse operators follow the new operator too
+(Galerkin products of the change, ``fem.galerkin_refresh``). Every solve checks the true residual of the operator it was given and
 raises ``SolverDivergedError`` rather than return an unconverged field.
 """
 
@@ -24,6 +25,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from diathermy.errors import SolverDivergedError
+from diathermy.fem.galerkin_refresh import GalerkinRefresh, RefreshStats
 from diathermy.fem.multigrid import deterministic_sa, v_cycle_preconditioner
 
 Preconditioner = Literal["amg", "jacobi", "none"]
@@ -79,6 +81,8 @@ class KrylovSolver:
         max_stale_solves: rebuild after this many solves with an outdated hierarchy (0: no limit).
         ritz: CG starts from the Ritz-scaled warm start (see ``_initial_guess``).
         method: "cg" for SPD operators, "gmres" otherwise.
+        refresh_coarse: a kept AMG hierarchy also gets the Galerkin coarse operators of each new
+            operator of the build-time sparsity (``fem.galerkin_refresh``), not only its fine level.
     """
 
     def __init__(
@@ -94,6 +98,7 @@ class KrylovSolver:
         max_stale_solves: int = 0,
         ritz: bool = True,
         method: Literal["cg", "gmres"] = "cg",
+        refresh_coarse: bool = False,
     ) -> None:
         if not 0 < rtol < 1:
             raise ValueError(f"{name}: rtol must lie in (0, 1), got {rtol}")
@@ -109,10 +114,16 @@ class KrylovSolver:
         self.max_stale_solves = max_stale_solves
         self.ritz = ritz
         self.method = method
+        self.refresh_coarse = refresh_coarse
         self.A: sp.spmatrix | None = None
+        self.scale: np.ndarray | None = None
         self._M: spla.LinearOperator | None = None
         self._stale = False
         self.reuse = ReuseState()
+        self._galerkin: GalerkinRefresh | None = None
+        self._coarse_due = False
+        self.last_refresh: RefreshStats | None = None
+        self.refresh_s = 0.0
         self._last_x: np.ndarray | None = None
         self.n_setups = 0
         self.n_solves = 0
@@ -131,7 +142,10 @@ class KrylovSolver:
     def kept_preconditioner(self) -> spla.LinearOperator | None:
         """The preconditioner the next solve would use without building one (None: it builds,
         because there is none yet or the kept hierarchy stopped paying)."""
-        return None if self.reuse.rebuild_due else self._M
+        if self.reuse.rebuild_due:
+            return None
+        self._refresh()
+        return self._M
 
     @property
     def warm_start(self) -> np.ndarray | None:
@@ -142,8 +156,14 @@ class KrylovSolver:
     def warm_start(self, x: np.ndarray | None) -> None:
         self._last_x = None if x is None else np.asarray(x, dtype=float).copy()
 
-    def set_operator(self, A: sp.spmatrix) -> None:
-        """Give the solver a new operator; its preconditioner is kept (stale) or rebuilt."""
+    def set_operator(
+        self, A: sp.spmatrix, changed: np.ndarray | None = None, scale: np.ndarray | None = None
+    ) -> None:
+        """Give the solver a new operator; its preconditioner is kept (stale) or rebuilt.
+        ``changed``: the indices into A.data (blocks for BSR) that may differ from the previous
+        operator's (None: any), so that ``refresh_coarse`` reads only those. ``scale``: A is the
+        Jacobi scaling S K S of an operator K with S = diag(scale) (see ``GalerkinRefresh``)."""
+        self.scale = None if scale is None else np.asarray(scale, dtype=float)
         if self.A is not None and A.shape != self.A.shape:
             self._M = None
             self._last_x = None
@@ -153,6 +173,9 @@ class KrylovSolver:
             ml = getattr(self, "_ml", None)
             if self.preconditioner == "amg" and ml is not None:
                 ml.levels[0].A = A  # smooth and restrict the new operator's residual
+                if self._galerkin is not None:
+                    self._galerkin.mark(changed)
+                    self._coarse_due = True
         else:
             self._M = None
 
@@ -161,9 +184,19 @@ class KrylovSolver:
         assert self.A is not None
         t0 = time.perf_counter()
         A = self.A
+        self._galerkin = None
         if self.preconditioner == "amg":
             self._ml = deterministic_sa(A, self.near_nullspace, self.amg_options)
             self._M = v_cycle_preconditioner(self._ml)
+            if self.refresh_coarse:
+                coarse = self.amg_options.get("coarse_solver", "pinv")
+                self._galerkin = GalerkinRefresh(
+                    self._ml,
+                    coarse_solver=coarse,
+                    scale=self.scale,
+                    fine=A,
+                )
+            self._coarse_due = False
         elif self.preconditioner == "jacobi":
             d = A.diagonal()
             if np.any(d <= 0):
@@ -176,6 +209,21 @@ class KrylovSolver:
         self.reuse = ReuseState()
         self.n_setups += 1
         return time.perf_counter() - t0
+
+    def before_write(self, data: np.ndarray, blocks: np.ndarray) -> None:
+        """The caller is about to change ``data[blocks]`` of an operator in place (a cut updating
+        the last one): a kept hierarchy's coarse refresh saves what it needs of the old values."""
+        if self._galerkin is not None:
+            self._galerkin.before_write(data, blocks)
+
+    def _refresh(self) -> None:
+        """Bring the kept hierarchy's coarse operators up to date with ``A`` when it changed."""
+        if not self._coarse_due or self._galerkin is None or self._M is None:
+            return
+        t0 = time.perf_counter()
+        self.last_refresh = self._galerkin.refresh(self.A, self.scale)
+        self._coarse_due = False
+        self.refresh_s += time.perf_counter() - t0
 
     def solve(self, b: np.ndarray, x0: np.ndarray | None = None) -> tuple[np.ndarray, SolveStats]:
         """Solve A x = b from x0 (default: the previous solution, a warm start)."""
@@ -193,6 +241,8 @@ class KrylovSolver:
         rebuilt = self._M is None
         stale = self._stale and not rebuilt
         setup_s = self.build() if rebuilt else 0.0
+        if stale:
+            self._refresh()
         x0, res0 = self._initial_guess(b, x0, b_norm)
         x, its, t_solve = self._krylov(b, x0)
         res = float(np.linalg.norm(b - self.A @ x)) / b_norm

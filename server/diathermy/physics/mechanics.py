@@ -185,8 +185,9 @@ class MechanicsSolver:
         # 1e6 stiffness contrast of the ersatz material as well-scaled rows (see benchmarks).
         self._scale = 1.0 / np.sqrt(diag)
         self._rows = base._rows if base is not None and self.updated else block_rows(K)
+        rescaled: np.ndarray | None = None  # the blocks of the scaled K that may have changed
         if base is not None and changed_blocks is not None:
-            data = base.scaled_data(
+            data, rescaled = base.scaled_data(
                 K, self._scale, self._rows, changed_blocks, in_place=consume_base
             )
         else:
@@ -201,7 +202,7 @@ class MechanicsSolver:
             amg_options=DEFAULT_AMG_OPTIONS if amg_options is None else amg_options,
         )
         self._krylov.near_nullspace = B
-        self._krylov.set_operator(self.K_scaled)
+        self._krylov.set_operator(self.K_scaled, changed=rescaled, scale=self._scale)
         self.consumed = False
         if base is not None and self.updated and consume_base:
             base.consumed = True  # its K and scaled K are now this solver's
@@ -258,17 +259,20 @@ class MechanicsSolver:
         blocks: np.ndarray,
         *,
         in_place: bool = False,
-    ) -> np.ndarray:
+    ) -> tuple[np.ndarray, np.ndarray]:
         """The 3x3 blocks of D^-1/2 K D^-1/2 for K, this solver's K with ``blocks`` changed, and
         its scale (3 n_nodes,): this solver's scaled blocks with those and every block in a row
-        or column whose scale changed scaled again; bit for bit ``scale_blocks`` of all."""
+        or column whose scale changed scaled again, bit for bit ``scale_blocks`` of all; and the
+        indices of the blocks scaled again."""
         moved = np.any(scale.reshape(-1, 3) != self._scale.reshape(-1, 3), axis=1)
         redo = moved[rows] | moved[K.indices]
         redo[blocks] = True
         idx = np.flatnonzero(redo)
         data = self.K_scaled.data if in_place else self.K_scaled.data.copy()
+        if in_place:
+            self._krylov.before_write(data, idx)
         data[idx] = scale_blocks(K.data[idx], scale.reshape(-1, 3), rows[idx], K.indices[idx])
-        return data
+        return data, idx
 
     @property
     def krylov(self) -> KrylovSolver:

@@ -110,6 +110,7 @@ class FEMBackend:
             amg_options=DEFAULT_AMG_OPTIONS,
             stale_factor=stale_factor,
             max_stale_solves=max_stale_solves,
+            refresh_coarse=True,
         )
         self._origin: tuple[np.ndarray, np.ndarray] | None = None
         self.n_builds = 0
