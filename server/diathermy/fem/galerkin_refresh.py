@@ -5,22 +5,20 @@ a new fine operator A when a few tets are cut, while its prolongators P_k and co
 A_k stay those of the build-time operator A_b. With the prolongators kept, the Galerkin coarse
 operators of A differ from the kept ones by the restricted change alone,
 
-    A_{k+1} - A_{k+1,b} = R_k (A_k - A_{k,b}) P_k =: D_{k+1},    D_0 = A - A_b,
+    A_{k+1} - A_{k+1,b} = P_k^T (A_k - A_{k,b}) P_k =: D_{k+1},    D_0 = A - A_b,
 
 and D_0 lives on the blocks the cuts changed, so each D_{k+1} is formed from the rows of P_k
-under the support of D_k: a product over a few hundred rows, not the 1 s of R A P on every level.
-Each refresh starts from the build-time operators (copied at the build: callers update their
-operators in place), so the coarse levels are a function of (A_b, A) alone and a checkpoint that
-rebuilds the hierarchy of A_b and then sets A repeats them bit for bit. The coarsest level's
-direct solver (a pseudo-inverse of a few hundred rows) is formed again for its new operator.
+under the support of D_k: a product over a few hundred rows (20-50 ms on the fixed electrode's
+169 k nodes), not the 1.1 s of R A P on every level. Each refresh starts from the build-time
+operators, so the coarse levels are a function of (A_b, A) alone and a checkpoint that rebuilds
+the hierarchy of A_b and then sets A repeats them bit for bit. No operator is copied: the coarse
+levels are written here only, and the caller announces its in-place writes to the fine one
+(``before_write``), so the build-time values of what changed are saved as they go (22 MB on
+the fixed electrode, where copies of A_b and P_0 took 518 MB). The coarsest level's direct
+solver (a pseudo-inverse of a few hundred rows) is formed again for its new operator.
 
-The refreshed coarse operators have a larger spectral radius than the kept ones (a cut makes
-the old prolongators' rigid modes stiff in the rescaled soft region: 0.28 -> 0.41-0.52 on level 1
-of a 9x9x17 block), and Chebyshev smoothing tuned to the build-time radius then amplifies those
-modes: the refreshed hierarchy took 44-89 CG iterations against 38-76 kept. So a level with
-Chebyshev smoothing gets its coefficients again, from max(build-time radius, largest eigenvalue
-of the refreshed operator on the rows the change touched): there it equalled the whole level's
-largest eigenvalue, and CG took 36-51 iterations.
+For a Jacobi-scaled operator A = S K S (``scale``) the change is taken in the build's units,
+P^T S_b (K - K_b) S_b P, with the fine prolongator diag(S_b / S) P: see ``refresh`` for why.
 """
 
 from __future__ import annotations
@@ -180,8 +178,11 @@ class GalerkinRefresh:
         prolongator P, made from the near-nullspace S_b^-1 B, is then in the wrong units there.
         The fine level's prolongator becomes diag(S_b / S) P, the one a build would make from
         S^-1 B with the same aggregates, and the coarse operators the Galerkin products of the
-        stiffness change in the build's units, P^T S_b (K - K_b) S_b P. Without it the coarse
-        radius grew by 1.3-1.8x in the cut, and smoothing tuned to the old radius amplified it.
+        stiffness change in the build's units, P^T S_b (K - K_b) S_b P, which softened tets
+        cannot make stiffer. Refreshed in the scaled units instead, level 1's spectral radius
+        grew 1.3-1.8x, the Chebyshev smoothing tuned to the build-time radius amplified those
+        modes, and a 9x9x17 block with large cuts took 44-89 CG iterations against 38-76 with
+        the kept coarse levels; in the build's units 30-37 (a fresh hierarchy 27-30).
         """
         if (
             A.shape != self._ml.levels[0].A.shape
