@@ -30,6 +30,8 @@ import numpy as np
 import scipy.sparse as sp
 from pyamg.multilevel import coarse_grid_solver
 
+from diathermy.fem.bsr_blocks import block_rows, scale_blocks
+
 
 @dataclass(frozen=True)
 class RefreshStats:
@@ -55,8 +57,31 @@ def _block_rows(indptr: np.ndarray, blocks: np.ndarray) -> np.ndarray:
 
 def _block_keys(A: Any) -> np.ndarray:
     """Stored block (row, column) of a canonical BSR/CSR matrix as one sorted int64 key each."""
-    rows = np.repeat(np.arange(A.indptr.size - 1, dtype=np.int64), np.diff(A.indptr))
-    return rows * np.int64(A.indices.max(initial=0) + 1) + A.indices
+    return block_rows(A).astype(np.int64) * np.int64(A.indices.max(initial=0) + 1) + A.indices
+
+
+def _blocks_in_rows(indptr: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The stored blocks (indices into the data) of block rows ``rows``, row by row, and how
+    many each row holds."""
+    starts, counts = indptr[rows], np.diff(indptr)[rows]
+    offsets = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    return np.repeat(starts, counts) + offsets, counts
+
+
+def _entries(blocks: np.ndarray, size: int) -> np.ndarray:
+    """Positions in the flat data of the stored blocks ``blocks`` of ``size`` entries each."""
+    return (blocks[:, None] * size + np.arange(size)).ravel()
+
+
+def _csr_of_blocks(
+    rows: np.ndarray, cols: np.ndarray, data: np.ndarray, shape: tuple[int, int]
+) -> sp.csr_matrix:
+    """CSR of the blocks data (m, br, bc) at block rows/columns (m,)."""
+    m, br, bc = data.shape
+    i = (rows * br)[:, None, None] + np.arange(br)[None, :, None]
+    j = (cols * bc)[:, None, None] + np.arange(bc)[None, None, :]
+    ij = (np.broadcast_to(i, data.shape).ravel(), np.broadcast_to(j, data.shape).ravel())
+    return sp.csr_matrix((data.ravel(), ij), shape=shape)
 
 
 class _Saved:
@@ -197,26 +222,30 @@ class GalerkinRefresh:
             ratio = self._scale / np.asarray(scale, dtype=float)
         nb = self._indices.size
         where = np.arange(nb) if self._dirty is None else self._dirty
-        now = A.data[where]
+        br, bc = self._fine_bs
+        now = A.data[where].reshape(where.size, br, bc)
         if ratio is not None:  # S_b K S_b = (S_b / S) A (S_b / S)
-            br, bc = self._fine_bs
-            ri = ratio.reshape(-1, br)[_block_rows(self._indptr, where)]
-            rj = ratio.reshape(-1, bc)[self._indices[where]]
-            now = now.reshape(where.size, br, bc) * ri[:, :, None] * rj[:, None, :]
+            r = ratio.reshape(-1, br)
+            now = scale_blocks(now, r, _block_rows(self._indptr, where), self._indices[where])
         built = self._fine.values(where)
         diff = now.reshape(where.size, -1) - built.reshape(where.size, -1)
         keep = np.any(diff != 0.0, axis=1)
         changed = where[keep]
         self._dirty = changed  # the blocks that differ from the build's stay candidates
-        delta = self._fine_delta(changed, diff[keep])
+        delta = _csr_of_blocks(
+            _block_rows(self._indptr, changed),
+            self._indices[changed],
+            diff[keep].reshape(-1, br, bc),
+            self._ml.levels[0].A.shape,
+        )
         slots = []
         for k in range(len(self._coarse)):
             delta = self._restrict(k, delta)
-            pos = self._slots(k, delta)
-            if pos is None:
+            slot = self._slots(k, delta)
+            if slot is None:
                 self._reset()
                 return RefreshStats(applied=False, changed_blocks=int(changed.size))
-            slots.append((pos, delta.tocoo().data))
+            slots.append(slot)
         for k, (pos, values) in enumerate(slots):
             self._write(k, pos, values)
         if self._p_edits is not None:
@@ -233,34 +262,20 @@ class GalerkinRefresh:
             rows = np.zeros(0, dtype=np.int64)
         else:
             rows = np.flatnonzero(np.any(ratio.reshape(-1, br) != 1.0, axis=1))
-        starts, counts = P.indptr[rows], np.diff(P.indptr)[rows]
-        blocks = np.repeat(starts, counts) + (
-            np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-        )
+        blocks, counts = _blocks_in_rows(P.indptr, rows)
         if ratio is None or blocks.size == 0:
             self._p_edits.set(np.zeros(0, dtype=np.int64), np.zeros(0))
             self._r_edits.set(np.zeros(0, dtype=np.int64), np.zeros(0))
             return
         block_rows = np.repeat(rows, counts)
-        pos = (blocks[:, None] * (br * bc) + np.arange(br * bc)).ravel()
+        pos = _entries(blocks, br * bc)
         factor = ratio.reshape(-1, br)[block_rows]  # (blocks, br)
         values = self._p_edits.base(pos).reshape(-1, br, bc) * factor[:, :, None]
         self._p_edits.set(pos, values.ravel())
         r_block = np.searchsorted(
             self._r_keys, P.indices[blocks].astype(np.int64) * self._r_width + block_rows
         )
-        r_pos = (r_block[:, None] * (br * bc) + np.arange(br * bc)).ravel()
-        self._r_edits.set(r_pos, values.transpose(0, 2, 1).ravel())
-
-    def _fine_delta(self, changed: np.ndarray, values: np.ndarray) -> sp.csr_matrix:
-        """The fine change as a CSR matrix holding the changed blocks only."""
-        br, bc = self._fine_bs
-        i = (_block_rows(self._indptr, changed) * br)[:, None, None] + np.arange(br)[None, :, None]
-        j = (self._indices[changed] * bc)[:, None, None] + np.arange(bc)[None, None, :]
-        shape = (changed.size, br, bc)
-        rows = np.broadcast_to(i, shape).ravel()
-        cols = np.broadcast_to(j, shape).ravel()
-        return sp.csr_matrix((values.ravel(), (rows, cols)), shape=self._ml.levels[0].A.shape)
+        self._r_edits.set(_entries(r_block, br * bc), values.transpose(0, 2, 1).ravel())
 
     def _restrict(self, k: int, delta: sp.csr_matrix) -> sp.csr_matrix:
         """P_k^T delta P_k (R_k = P_k^T) with the build-time P_k, formed on the rows of P_k
@@ -280,42 +295,29 @@ class GalerkinRefresh:
         P = self._ml.levels[k].P
         br, bc = _blocksize(P)
         brows = np.unique(rows // br)
-        starts, counts = P.indptr[brows], np.diff(P.indptr)[brows]
-        blocks = np.repeat(starts, counts) + (
-            np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-        )
+        blocks, counts = _blocks_in_rows(P.indptr, brows)
         if k == 0 and self._p_edits is not None:
-            pos = (blocks[:, None] * (br * bc) + np.arange(br * bc)).ravel()
-            data = self._p_edits.base(pos).reshape(-1, br, bc)
+            data = self._p_edits.base(_entries(blocks, br * bc)).reshape(-1, br, bc)
         else:
             data = P.data[blocks].reshape(-1, br, bc)
         local = np.repeat(np.arange(brows.size), counts)
-        i = (local * br)[:, None, None] + np.arange(br)[None, :, None]
-        j = (P.indices[blocks] * bc)[:, None, None] + np.arange(bc)[None, None, :]
-        shape = (blocks.size, br, bc)
-        block = sp.csr_matrix(
-            (
-                data.ravel(),
-                (np.broadcast_to(i, shape).ravel(), np.broadcast_to(j, shape).ravel()),
-            ),
-            shape=(brows.size * br, P.shape[1]),
-        )
+        block = _csr_of_blocks(local, P.indices[blocks], data, (brows.size * br, P.shape[1]))
         return block[np.searchsorted(brows, rows // br) * br + rows % br]
 
-    def _slots(self, k: int, delta: sp.csr_matrix) -> np.ndarray | None:
-        """Positions in level k+1's flat data of delta's entries (None: one lies outside the
-        kept sparsity)."""
+    def _slots(self, k: int, delta: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray] | None:
+        """Positions in level k+1's flat data of delta's entries, and their values (None: one
+        lies outside the kept sparsity)."""
         A = self._ml.levels[k + 1].A
         coo = delta.tocoo()
         br, bc = _blocksize(A)
         keys = self._keys[k]
         key = (coo.row // br).astype(np.int64) * self._key_width[k] + coo.col // bc
         if key.size == 0:
-            return np.zeros(0, dtype=np.int64)
+            return np.zeros(0, dtype=np.int64), np.zeros(0)
         slot = np.minimum(np.searchsorted(keys, key), keys.size - 1)
         if not np.array_equal(keys[slot], key):
             return None
-        return (slot * br + coo.row % br) * bc + coo.col % bc
+        return (slot * br + coo.row % br) * bc + coo.col % bc, coo.data
 
     def _write(self, k: int, pos: np.ndarray, values: np.ndarray) -> None:
         """Level k+1's operator := its build-time one + values at pos."""
