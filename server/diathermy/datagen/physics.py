@@ -98,6 +98,7 @@ class FemPhysics:
             tissue=self.config.material,
             grads=self.assembler.geom.grads,
             tets=self.mesh.tets,
+            grid=self.mesh.grid,
         )
         return out.u, W
 

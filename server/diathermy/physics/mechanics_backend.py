@@ -10,14 +10,14 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
-import scipy.sparse as sp
 
 from diathermy.fem.elastic import ElasticAssembler
 from diathermy.fem.solvers import KrylovSolver, ReuseState
 from diathermy.mesh import TetMesh
+from diathermy.mesh.grid import Grid
 from diathermy.physics.materials import Tissue, ersatz_youngs_modulus
 from diathermy.physics.mechanics import DEFAULT_AMG_OPTIONS, MechanicsSolver, mechanics_assembler
-from diathermy.physics.strain_energy import strain_energy_density
+from diathermy.physics.strain_energy import kuhn_strain_energy_density, strain_energy_density
 
 MECHANICS_STALE_FACTOR = 2.0
 """Keep the AMG hierarchy of an earlier topology until CG converges 2x slower per iteration
@@ -225,7 +225,7 @@ def solve_with_cut(
     grads: np.ndarray,
     tets: np.ndarray,
     previous_W: np.ndarray | None = None,
-    gradient: sp.csr_matrix | None = None,
+    grid: Grid | None = None,
 ) -> tuple[MechanicsOutput, np.ndarray]:
     """Displacement under the pore pressure (Pa) with the cut as ersatz material, and the strain
     energy density per tet (J/m^3) of the stiffness it was solved with (a loose fragment is
@@ -234,7 +234,7 @@ def solve_with_cut(
     ``previous_W`` (n_tets,) is the strain energy of the warm start: when the backend says u is
     alpha x the warm start but on a few nodes (``MechanicsOutput.rescaled``), W is alpha^2 x it
     except on the tets of those nodes and the tets whose E changed, which are recomputed.
-    ``gradient``: the mesh's gradient matrix, for a faster W of the whole mesh."""
+    ``grid``: the grid whose Kuhn mesh ``tets`` is, for a faster W of the whole mesh."""
     E = ersatz_youngs_modulus(~removed, tissue.youngs_modulus_pa, tissue.ersatz_stiffness_ratio)
     out = backend.solve(
         pressure_pa=pressure_pa,
@@ -248,9 +248,9 @@ def solve_with_cut(
         E_eff[out.loose_tets] = tissue.ersatz_stiffness_ratio * tissue.youngs_modulus_pa
     r = out.rescaled
     if r is None or previous_W is None:
-        return out, strain_energy_density(
-            grads, tets, out.u, E_eff, tissue.poisson_ratio, gradient=gradient
-        )
+        if grid is not None:
+            return out, kuhn_strain_energy_density(out.u, grid, E_eff, tissue.poisson_ratio)
+        return out, strain_energy_density(grads, tets, out.u, E_eff, tissue.poisson_ratio)
     moved = np.zeros(out.u.shape[0], dtype=bool)
     moved[r.nodes] = True
     redo = np.flatnonzero(moved[tets].any(axis=1) | (E_eff != r.previous_E_pa))

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 
 from diathermy.fem.elastic import lame_parameters
+from diathermy.mesh.grid import Grid
+from diathermy.mesh.tet_mesh import kuhn_corners
 
 
 def strain_energy_density(
@@ -14,28 +15,63 @@ def strain_energy_density(
     u: np.ndarray,
     youngs_modulus_pa: np.ndarray | float,
     nu: float,
-    *,
-    gradient: sp.csr_matrix | None = None,
 ) -> np.ndarray:
     """W = 1/2 eps(u) : C : eps(u) per tet (n_tets,) in J/m^3, of the TOTAL strain.
 
     PHYSICS.md section 2: the total strain, so free swelling under Delta p stores Delta p^2 / 2K
     (the energy in the pore walls). ``grads`` (n_tets, 4, 3) in 1/m, ``u`` (n_nodes, 3) in m,
-    E per tet or one number in Pa: W = lambda/2 tr(eps)^2 + mu eps : eps.
-
-    ``gradient``: the mesh's ``fem.geometry.gradient_matrix`` when ``tets`` is the whole mesh;
-    the same numbers about twice as fast (``grads`` and ``tets`` are then not read).
+    E per tet or one number in Pa: W = lambda/2 tr(eps)^2 + mu eps : eps. On a whole Kuhn mesh
+    ``kuhn_strain_energy_density`` gives the same numbers faster.
     """
-    if gradient is not None:
-        G = (gradient @ u).reshape(-1, 3, 3)  # [e, k, i] = du_i / dx_k: W is the same for G^T
-    else:
-        G = np.matmul(np.swapaxes(u[tets], 1, 2), grads)  # du_i / dx_k; 3x an einsum's speed
-    eps = G + np.swapaxes(G, 1, 2)
-    eps *= 0.5
+    G = np.matmul(np.swapaxes(u[tets], 1, 2), grads)  # du_i / dx_k; 3x an einsum's speed
     lam, mu = lame_parameters(youngs_modulus_pa, nu)
-    trace = eps[:, 0, 0] + eps[:, 1, 1] + eps[:, 2, 2]
-    flat = eps.reshape(-1, 9)
-    return 0.5 * lam * trace**2 + mu * np.einsum("ei,ei->e", flat, flat)
+    return _energy([[G[:, k, i] for i in range(3)] for k in range(3)], lam, mu)
+
+
+def _energy(G: list[list[np.ndarray]], lam: np.ndarray, mu: np.ndarray) -> np.ndarray:
+    """W = lambda/2 tr(eps)^2 + mu eps : eps from the displacement gradient G[k][i] = du_i/dx_k
+    (arrays of one shape), eps = (G + G^T) / 2, so eps : eps = sum_i G_ii^2 + 1/2 sum_{i<k}
+    (G_ik + G_ki)^2."""
+    trace = G[0][0] + G[1][1] + G[2][2]
+    shear = (G[0][1] + G[1][0]) ** 2 + (G[0][2] + G[2][0]) ** 2 + (G[1][2] + G[2][1]) ** 2
+    eps_eps = G[0][0] ** 2 + G[1][1] ** 2 + G[2][2] ** 2 + 0.5 * shear
+    return 0.5 * lam * trace**2 + mu * eps_eps
+
+
+def kuhn_strain_energy_density(
+    u: np.ndarray, grid: Grid, youngs_modulus_pa: np.ndarray | float, nu: float
+) -> np.ndarray:
+    """``strain_energy_density`` of every tet of the Kuhn mesh of ``grid`` (TetMesh order: tet
+    6 cell + s), u (n_nodes, 3) in m, E per tet or one number in Pa, from node differences.
+
+    A Kuhn tet runs 000 -> e_a -> e_a + e_b -> 111 through its cell, so its gradient along axis
+    a is the difference of u along the cell's a-edge that the path takes, over the cell's
+    length: three per-axis differences of the nodal field, sliced per shape, give every tet's
+    gradient without a gather or a sparse product (4x the gradient matrix's speed on the
+    fixed electrode's 958 k tets, 29 against 113 ms)."""
+    nz, ny, nx = grid.shape
+    cz, cy, cx = nz - 1, ny - 1, nx - 1
+    ug = np.asarray(u, dtype=float).reshape(nz, ny, nx, 3)
+    hx, hy, hz = grid.cell_sizes_m()
+    # diffs[a][i]: du_i along axis a (x, y, z) over the cell length, on the grid's (z, y, x) axes
+    diffs = [
+        [np.diff(ug[..., i], axis=2) / hx for i in range(3)],
+        [np.diff(ug[..., i], axis=1) / hy[:, None] for i in range(3)],
+        [np.diff(ug[..., i], axis=0) / hz[:, None, None] for i in range(3)],
+    ]
+    lam, mu = lame_parameters(youngs_modulus_pa, nu)
+    lam_s = np.broadcast_to(lam, (cz * cy * cx * 6,)).reshape(cz, cy, cx, 6)
+    mu_s = np.broadcast_to(mu, (cz * cy * cx * 6,)).reshape(cz, cy, cx, 6)
+    out = np.empty((cz, cy, cx, 6))
+    for s, corners in enumerate(kuhn_corners()):
+        path = corners[np.argsort(corners.sum(axis=1))]  # 000, e_a, e_a + e_b, 111
+        G: list[list[np.ndarray]] = [[], [], []]
+        for start, end in zip(path[:-1], path[1:], strict=True):
+            a = int(np.argmax(end - start))
+            ox, oy, oz = start
+            G[a] = [d[oz : oz + cz, oy : oy + cy, ox : ox + cx] for d in diffs[a]]
+        out[..., s] = _energy(G, lam_s[..., s], mu_s[..., s])
+    return out.reshape(-1)
 
 
 def relative_strain_energy_error(W: np.ndarray, W_ref: np.ndarray) -> float:

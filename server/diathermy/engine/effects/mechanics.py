@@ -69,7 +69,7 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
         grads=ctx.disc.geom.grads,
         tets=ctx.disc.mesh.tets,
         previous_W=state["strain_energy"],
-        gradient=ctx.disc.gradient,
+        grid=ctx.disc.mesh.grid,
     )
     return Outcome(
         EffectReport(
