@@ -71,6 +71,17 @@ def test_locate_returns_containing_tet(small_mesh, rng):
     assert np.allclose(back, xyz)
 
 
+def test_tets_touching_matches_brute_force(small_mesh, rng):
+    """Every tet with one of the nodes as a vertex, and no other, corners and faces included."""
+    corners = [0, small_mesh.n_nodes - 1]
+    for nodes in (rng.choice(small_mesh.n_nodes, 7, replace=False), corners, []):
+        got = small_mesh.tets_touching(np.asarray(nodes, dtype=np.int64))
+        want = np.flatnonzero(np.isin(small_mesh.tets, nodes).any(axis=1))
+        assert np.array_equal(got, want)
+    every = small_mesh.tets_touching(np.arange(small_mesh.n_nodes))
+    assert np.array_equal(every, np.arange(small_mesh.n_tets))
+
+
 @pytest.mark.parametrize("shape", [(1, 3, 3), (3, 3, 0)])
 def test_bad_grid_rejected(shape):
     with pytest.raises(MeshError, match="node counts"):

@@ -8,7 +8,6 @@ itself reads no registry, file or environment variable it was not handed.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import replace
 from pathlib import Path
 from typing import Literal
 
@@ -94,12 +93,9 @@ def make_backend(
             p0_pa=tissue.p_atm_pa,
             rtol=cfg.rtol,
             ersatz_ratio=tissue.ersatz_stiffness_ratio,
-            # the discretization's pattern, geometry and gradient: the backend's own build has
-            # the same pattern and geometry (a second copy: ~9 % of the engine's memory)
-            assembler=replace(
-                elastic_assembler(disc.pattern, disc.geom, disc.mesh.shape_id),
-                gradient=disc.gradient,
-            ),
+            # the discretization's pattern and geometry: the backend's own build has the same
+            # (a second copy: ~9 % of the engine's memory)
+            assembler=elastic_assembler(disc.pattern, disc.geom, disc.mesh.shape_id),
         )
         if not ctx.scene.solver.incremental or cfg.predictor == "none":
             return fem

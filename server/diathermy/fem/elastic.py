@@ -62,7 +62,6 @@ class ElasticAssembler:
     reference_tets: np.ndarray | None = None  # (6,) one tet of each Kuhn shape
     cell_factors: np.ndarray | None = None  # (n_tets, 6) |T| / (h_p h_q) on a graded mesh
     unit_grads: np.ndarray | None = None  # (6, 4, 3) reference gradients on the unit cube
-    gradient: sp.csr_matrix | None = None  # the mesh's gradient_matrix, for the eigenstress load
 
     def stiffness(self, youngs_modulus: np.ndarray | float, nu: float) -> sp.bsr_matrix:
         """Stiffness matrix (3 n_nodes, 3 n_nodes) as BSR 3x3 blocks; E per tet in Pa."""
@@ -202,31 +201,31 @@ def eigenstress_load(
     pressure_excess_pa: np.ndarray,
     tet_weight: np.ndarray | None = None,
     *,
-    gradient: sp.csr_matrix | None = None,
+    touching: np.ndarray | None = None,
 ) -> np.ndarray:
     """Nodal force (n_nodes, 3) in N of an isotropic eigenstress: int (p - p0) div v.
 
     ``pressure_excess_pa`` is the nodal p - p0 (n_nodes,); P1 integrated exactly against the
     constant div v of a tet: |T| mean_T(p - p0) grad N_a. ``tet_weight`` (n_tets,) scales the
-    eigenstress per tet (0 where there is no tissue to carry a pore pressure). ``gradient``:
-    the mesh's ``gradient_matrix``, the same sum as G^T applied to q per axis, over the tets
-    with a non-zero q only (faster).
+    eigenstress per tet (0 where there is no tissue to carry a pore pressure). ``touching``:
+    indices of tets that include every tet with a node where p - p0 is not zero (for example
+    ``TetMesh.tets_touching``); only those are summed: a few thousand of a million while the
+    tissue boils, instead of a gather over every tet.
     """
-    q = geom.volumes * (np.asarray(pressure_excess_pa, dtype=float)[tets] @ np.full(4, 0.25))
-    if tet_weight is not None:
-        q = q * tet_weight
-    if gradient is not None:
-        # only the tets with a pressure excess load the nodes (a few thousand of a million
-        # while the tissue boils): f_k = G_k^T q over their rows 3e + k
-        active = np.flatnonzero(q)
-        out = np.zeros((n_nodes, 3))
-        for k in range(3):
-            out[:, k] = gradient[3 * active + k].T @ q[active]
-        return out
+    dp = np.asarray(pressure_excess_pa, dtype=float)
+    if touching is not None:
+        tets = tets[touching]
+        vol, grads = geom.volumes[touching], geom.grads[touching]
+        weight = None if tet_weight is None else np.asarray(tet_weight)[touching]
+    else:
+        vol, grads, weight = geom.volumes, geom.grads, tet_weight
+    q = vol * (dp[tets] @ np.full(4, 0.25))
+    if weight is not None:
+        q = q * weight
     idx = tets.ravel()
     return np.column_stack(
         [
-            np.bincount(idx, (q[:, None] * geom.grads[:, :, i]).ravel(), minlength=n_nodes)
+            np.bincount(idx, (q[:, None] * grads[:, :, i]).ravel(), minlength=n_nodes)
             for i in range(3)
         ]
     )

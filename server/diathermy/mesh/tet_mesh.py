@@ -81,6 +81,34 @@ class TetMesh:
         cell = (np.asarray(k) * (g.ny - 1) + np.asarray(j)) * (g.nx - 1) + np.asarray(i)
         return 6 * np.asarray(cell)[..., None] + np.arange(6)
 
+    def tets_touching(self, nodes: np.ndarray) -> np.ndarray:
+        """Sorted indices of the tets that have at least one of ``nodes`` (flat node indices) as
+        a vertex: from the up to 8 cells around each node, no search over the mesh."""
+        nodes = np.asarray(nodes, dtype=np.int64).ravel()
+        if nodes.size == 0:
+            return np.zeros(0, dtype=np.int64)
+        g = self.grid
+        k, j, i = g.grid_index(nodes)
+        step = np.array([-1, 0])
+        cells = []
+        for a, n in ((k, g.nz), (j, g.ny), (i, g.nx)):
+            c = a[:, None] + step  # the cells below and above the node along this axis
+            cells.append(np.where((c >= 0) & (c < n - 1), c, -1))
+        ck = cells[0][:, :, None, None]
+        cj = cells[1][:, None, :, None]
+        ci = cells[2][:, None, None, :]
+        valid = ((ck >= 0) & (cj >= 0) & (ci >= 0)).ravel()
+        shape = (nodes.size, 2, 2, 2)
+        cand = self.cell_tets(
+            np.broadcast_to(ck, shape).ravel()[valid],
+            np.broadcast_to(cj, shape).ravel()[valid],
+            np.broadcast_to(ci, shape).ravel()[valid],
+        )
+        cand = np.unique(cand)
+        mark = np.zeros(self.n_nodes, dtype=bool)
+        mark[nodes] = True
+        return cand[mark[self.tets[cand]].any(axis=1)]
+
     def locate(self, xyz: np.ndarray, tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
         """Containing tet (n,) and barycentric coordinates (n, 4) of points (n, 3) in the block.
 

@@ -294,7 +294,7 @@ class MechanicsSolver:
             self.mesh.n_nodes,
             dp,
             self.healthy,
-            gradient=self.assembler.gradient,
+            touching=self.mesh.tets_touching(np.flatnonzero(dp)),
         ).ravel()
         if self._lift is not None:
             f -= self._lift

@@ -28,7 +28,7 @@ from diathermy.fem.multigrid import deterministic_sa, v_cycle_preconditioner
 from diathermy.fem.window_box import WindowBox, choose_box, nodes_in_box
 from diathermy.physics.local_solve import WINDOW_MAX_FRACTION, IncrementalSettings
 from diathermy.physics.mechanics import DEFAULT_AMG_OPTIONS, MechanicsSolver
-from diathermy.physics.patch_correction import apply_from_rows, block_rows_plan
+from diathermy.physics.patch_correction import block_rows_plan
 from diathermy.physics.window_history import History, augmented_correct
 
 
@@ -62,7 +62,7 @@ class PolishWindow:
     indptr: np.ndarray
     indices: np.ndarray
     pattern: np.ndarray  # the global block pattern's indices the plan was made for
-    rows: tuple[np.ndarray, np.ndarray]  # ``block_rows_plan`` of the window's nodes
+    ring: tuple[np.ndarray, np.ndarray, np.ndarray]  # ``ring_plan`` of the window
     preconditioner: spla.LinearOperator
     built_E: np.ndarray
     built_healthy: np.ndarray
@@ -94,13 +94,40 @@ class PolishWindow:
         self.hierarchy.levels[0].A = Aw
         return Aw
 
-    def spread(self, A: sp.bsr_matrix, delta: np.ndarray) -> np.ndarray:
-        """A @ d (all DOFs) for d = ``delta`` (the window's DOFs) and 0 elsewhere, from the
-        window's own block rows (A symmetric: (A d)_c = sum_r A_rc^T d_r), not a global mat-vec."""
-        rows_pos, row_of = self.rows
+    def spread(
+        self, A: sp.bsr_matrix, delta: np.ndarray, Aw: sp.bsr_matrix | None = None
+    ) -> np.ndarray:
+        """A @ d (all DOFs) for d = ``delta`` (the window's DOFs) and 0 elsewhere, not a global
+        mat-vec: the window's block (``Aw``, this step's ``matrix(A)``, when the caller has it)
+        on its own rows, and the blocks of the ring of nodes next to it on theirs."""
+        if Aw is None:
+            Aw = self.matrix(A)
+        positions, ring_rows, ring_cols = self.ring
         d = np.reshape(delta, (-1, 3))
         n = A.shape[0] // 3
-        return apply_from_rows(A.data[rows_pos], row_of, A.indices[rows_pos], d, n).ravel()
+        out = np.zeros((n, 3))
+        out[self.nodes] = np.reshape(Aw @ np.ravel(delta), (-1, 3))
+        Ad = np.einsum("bij,bj->bi", A.data[positions], d[ring_cols])
+        for i in range(3):
+            out[:, i] += np.bincount(ring_rows, Ad[:, i], minlength=n)
+        return out.ravel()
+
+
+def ring_plan(
+    indptr: np.ndarray, indices: np.ndarray, nodes: np.ndarray, n_nodes: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The blocks of a block pattern (indptr, indices) of n_nodes block rows that couple a node
+    outside ``nodes`` (ascending) to one inside: (their positions in the data, their global
+    block row, their column's index in ``nodes``)."""
+    local = np.full(n_nodes, -1, dtype=np.int64)
+    local[nodes] = np.arange(nodes.size)
+    rows_pos, _ = block_rows_plan(indptr, nodes)
+    cols = indices[rows_pos]
+    ring = np.unique(cols[local[cols] < 0])  # the pattern is symmetric: rows that reach in
+    pos, row_of = block_rows_plan(indptr, ring)
+    inside = local[indices[pos]]
+    keep = inside >= 0
+    return pos[keep], ring[row_of[keep]], inside[keep]
 
 
 def build_window(
@@ -132,7 +159,7 @@ def build_window(
         indptr,
         indices,
         A.indices,
-        block_rows_plan(A.indptr, nodes),
+        ring_plan(A.indptr, A.indices, nodes, points.shape[0]),
         v_cycle_preconditioner(ml),
         built_E.copy(),
         built_healthy.copy(),
@@ -229,7 +256,8 @@ class WindowedPolish:
         if res.estimate > tol:
             self.window = None  # stale for this change: the next step builds a new one
         dofs = w.dofs
-        r_new = r - w.spread(A, res.x)
+        # both solves above made the window's block of A its V-cycle's fine level this step
+        r_new = r - w.spread(A, res.x, w.hierarchy.levels[0].A)
         if c is None or hist is None:  # the rest held, bit for bit
             corrected = u.ravel().copy()
             corrected[dofs] = (x0[dofs] + res.x) * s[dofs]

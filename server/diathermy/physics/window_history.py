@@ -34,7 +34,9 @@ class PolishWindow(Protocol):
 
     def operator(self, A: sp.bsr_matrix) -> sp.bsr_matrix: ...
 
-    def spread(self, A: sp.bsr_matrix, delta: np.ndarray) -> np.ndarray: ...
+    def spread(
+        self, A: sp.bsr_matrix, delta: np.ndarray, Aw: sp.bsr_matrix | None = None
+    ) -> np.ndarray: ...
 
 
 HISTORY_CUTOFF = 1e-10
