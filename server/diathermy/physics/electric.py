@@ -27,9 +27,9 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from diathermy.errors import SceneError
+from diathermy.fem.direct import spd_factor
 from diathermy.fem.edge_update import EdgeIncidence, edge_incidence, update_laplacian
 from diathermy.fem.edges import EdgeStiffness, LaplacianPattern, laplacian_pattern
 from diathermy.fem.energy_cg import EnergyCG, energy_cg
@@ -288,7 +288,7 @@ class PotentialSolver:
         if W.size > WINDOW_MAX_NODES:  # the change itself spans more: PCG over the block
             return x0, r
         rows = A[W]
-        d = spla.splu(rows[:, W].tocsc()).solve(r[W])
+        d = spd_factor(rows[:, W]).solve(r[W])  # a block of the SPD scaled operator
         x = x0.copy()
         x[W] += d
         self._window_nodes = int(W.size)
