@@ -117,3 +117,30 @@ def test_convergence_rate():
     assert convergence_rate(1.0, 1e-8, 4) == 2.0
     assert convergence_rate(1.0, 1e-8, 0) == 0.0
     assert convergence_rate(1e-9, 1e-8, 3) == 0.0
+
+
+def test_deferred_near_nullspace_is_made_once_and_only_when_built(rng):
+    """Candidates given as a maker are formed on the first build, not before, and only once;
+    the hierarchy is the one the same candidates given outright build."""
+    A = diffusion(np.ones(N**3))
+    B = np.ones((N**3, 1))
+    calls = []
+
+    def make() -> np.ndarray:
+        calls.append(1)
+        return B.copy()
+
+    lazy, eager = solver(stale_factor=2.0), solver(stale_factor=2.0)
+    lazy.defer_near_nullspace(make)
+    eager.near_nullspace = B
+    lazy.set_operator(A)
+    eager.set_operator(A)
+    assert not calls  # no build yet
+    b = rng.normal(size=N**3)
+    x_lazy, _ = lazy.solve(b)
+    x_eager, _ = eager.solve(b)
+    assert calls == [1]
+    assert np.array_equal(x_lazy, x_eager)
+    lazy.set_operator(diffusion(np.full(N**3, 1.01)))  # kept: nothing new to make
+    lazy.solve(b)
+    assert calls == [1] and np.array_equal(lazy.near_nullspace, B)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from diathermy.errors import SceneError, SolverDivergedError
-from diathermy.fem.elastic import eigenstress_load, lame_parameters, strain
+from diathermy.fem.elastic import eigenstress_load, lame_parameters, rigid_body_modes, strain
 from diathermy.mesh import Grid, build_tet_mesh
 from diathermy.physics.constraints import Constraints, clamped_bottom, rollers
 from diathermy.physics.fragments import find_fragments
@@ -256,6 +256,12 @@ def test_updated_stiffness_equals_a_fresh_build_bit_for_bit(graded, consume):
         assert np.array_equal(solver.scale, fresh.scale)
         assert np.array_equal(solver._diag, fresh.K.diagonal())
         assert np.array_equal(solver.K_scaled.data, fresh.K_scaled.data)  # scaled in place too
+        B = solver.krylov.near_nullspace  # made when asked: the rigid modes, scaled, held DOFs 0
+        assert np.array_equal(B, fresh.krylov.near_nullspace)
+        assert np.all(B[solver.constrained] == 0.0)
+        free = ~solver.constrained
+        modes = rigid_body_modes(mesh.points)
+        assert np.allclose(B[free] * solver.scale[free, None], modes[free], rtol=1e-12, atol=0)
         p = P0 + DP * healthy.any() * np.ones(mesh.n_nodes)
         assert np.array_equal(solver.solve(p).u, fresh.solve(p).u)
 

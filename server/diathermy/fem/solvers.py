@@ -17,6 +17,7 @@ raises ``SolverDivergedError`` rather than return an unconverged field.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -108,7 +109,7 @@ class KrylovSolver:
         self.rtol = rtol
         self.maxiter = maxiter
         self.preconditioner = preconditioner
-        self.near_nullspace = near_nullspace
+        self._near_nullspace: np.ndarray | Callable[[], np.ndarray] | None = near_nullspace
         self.amg_options = dict(amg_options or {})
         self.stale_factor = stale_factor
         self.max_stale_solves = max_stale_solves
@@ -127,6 +128,23 @@ class KrylovSolver:
         self._last_x: np.ndarray | None = None
         self.n_setups = 0
         self.n_solves = 0
+
+    @property
+    def near_nullspace(self) -> np.ndarray | None:
+        """The AMG near-nullspace candidates (n, k); a deferred one is made on first use."""
+        if callable(self._near_nullspace):
+            self._near_nullspace = self._near_nullspace()
+        return self._near_nullspace
+
+    @near_nullspace.setter
+    def near_nullspace(self, value: np.ndarray | None) -> None:
+        self._near_nullspace = value
+
+    def defer_near_nullspace(self, make: Callable[[], np.ndarray]) -> None:
+        """Candidates made by ``make`` only when a hierarchy is built (or they are read): an
+        operator update that keeps the hierarchy need not form them (the elasticity's are 6
+        columns over every DOF, 24 MB on the fixed electrode's grid, made again each cut)."""
+        self._near_nullspace = make
 
     @property
     def hierarchy_levels(self) -> int:

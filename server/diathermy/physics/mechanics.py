@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from functools import partial
 from typing import Any, Literal
 
 import numpy as np
@@ -77,6 +78,16 @@ class MechanicsResult:
 
     u: np.ndarray
     stats: MechanicsStats
+
+
+def scaled_near_nullspace(
+    rigid_modes: np.ndarray, scale: np.ndarray, constrained: np.ndarray
+) -> np.ndarray:
+    """The rigid-body modes (3 n_nodes, 6) seen by the Jacobi-scaled system (x = u / scale),
+    zero on the constrained DOFs: the near-nullspace of its AMG hierarchy."""
+    B = rigid_modes / scale[:, None]
+    B[constrained] = 0.0
+    return B
 
 
 class MechanicsSolver:
@@ -143,8 +154,7 @@ class MechanicsSolver:
             base = None
         # the mesh's rigid-body modes (3 n_nodes, 6), from the base when there is one
         self._rigid_modes = rigid_body_modes(mesh.points) if base is None else base._rigid_modes
-        B = self._rigid_modes.copy()
-        if base is None and np.linalg.matrix_rank(B[self.constrained]) < 6:
+        if base is None and np.linalg.matrix_rank(self._rigid_modes[self.constrained]) < 6:
             raise SceneError("the constraints leave rigid-body motions of the block free")
         # the loose-fragment search of a cut: near the cut when that proves it (see fragments)
         self._centroids: np.ndarray | None = None
@@ -193,15 +203,15 @@ class MechanicsSolver:
         else:
             data = scale_blocks(K.data, self._scale.reshape(-1, 3), self._rows, K.indices)
         self.K_scaled = sp.bsr_matrix((data, K.indices, K.indptr), shape=K.shape)
-        B[self.constrained] = 0.0  # near-nullspace restricted to the free DOFs
-        B /= self._scale[:, None]
         self._krylov = krylov or KrylovSolver(
             "elasticity",
             rtol=rtol,
             maxiter=maxiter,
             amg_options=DEFAULT_AMG_OPTIONS if amg_options is None else amg_options,
         )
-        self._krylov.near_nullspace = B
+        self._krylov.defer_near_nullspace(
+            partial(scaled_near_nullspace, self._rigid_modes, self._scale, self.constrained)
+        )
         self._krylov.set_operator(self.K_scaled, changed=rescaled, scale=self._scale)
         self.consumed = False
         if base is not None and self.updated and consume_base:
