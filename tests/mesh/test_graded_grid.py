@@ -104,6 +104,14 @@ def test_refined_end_fills_any_length(length):
         assert np.all(ratio <= 1.25 * (1 + 1e-9)) and np.all(ratio >= 1 - 1e-9)
 
 
+def test_refined_end_with_a_growth_a_rounding_error_above_one():
+    """A growth of 1 + 2e-16 (hypothesis found it) asks for 3e15 graded cells by the ratio alone;
+    the length bounds them: end-sized cells, as with no grading, at once."""
+    d = refined_end(1.0, 1.0, 0.5, 1.0000000000000002)
+    assert d.sum() == pytest.approx(1.0, rel=1e-12) and d.size == 2
+    assert np.allclose(d, 0.5)
+
+
 def test_max_cell_caps_the_far_field():
     x = graded_axis(0.0, 0.2, (0.0, 0.01), 1e-3, 1.5, max_cell=5e-3)
     assert np.diff(x).max() <= 5e-3 * (1 + 1e-9)

@@ -77,6 +77,9 @@ def refined_end(length: float, fine: float, end: float, growth: float) -> np.nda
         n = max(1, math.ceil(length / end * (1.0 - 1e-12)))
         return np.full(n, length / n)
     steps = max(1, math.ceil(math.log(fine / end) / math.log(growth) - 1e-9))
+    # each graded cell is at least ``end``: more than length / end of them cover the length and
+    # are cut below anyway (a growth a rounding error above 1 asked for 3e15 cells)
+    steps = min(steps, math.ceil(length / end) + 1)
     graded = np.minimum(end * growth ** np.arange(steps, dtype=float), fine)
     covered = np.cumsum(graded)
     if covered[-1] >= length * (1.0 - 1e-12):
