@@ -86,7 +86,7 @@ def test_reused_potential_scales_its_joule_heat_and_load():
         assert "reused" in rep.effects["electric"].reason
         V, q = sim.state["potential"], sim.state["joule_heat"]
         sigma = np.full(sim.ctx.disc.n_tets, sim.tissue.sigma_s_per_m)
-        assert np.abs(q - joule_heat(sim.ctx.disc.gradient, sigma, V)).max() <= 1e-12 * q.max()
+        assert np.abs(q - joule_heat(sim.ctx.disc.grid, sigma, V)).max() <= 1e-12 * q.max()
         load = sim.ctx.heat.hmesh.joule_load(q)
         assert load.sum() == pytest.approx(12.0, rel=1e-9)  # the set power, to round-off
     assert sim.potential.solver.krylov.n_solves == 1

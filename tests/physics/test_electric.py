@@ -7,7 +7,7 @@ import pytest
 
 from diathermy.errors import SceneError
 from diathermy.fem.edges import edge_stiffness
-from diathermy.fem.geometry import element_geometry, gradient_matrix, structured_geometry
+from diathermy.fem.geometry import structured_geometry
 from diathermy.fem.scalar import surface_load, volume_load
 from diathermy.mesh import Grid, TetMesh, build_tet_mesh
 from diathermy.physics.contact_load import contact_weights, disk_quadrature
@@ -89,15 +89,24 @@ def test_contact_weights_match_reference_loop(small_mesh):
 
 
 def test_joule_heat_matches_reference_loop(small_mesh, rng):
-    geom = element_geometry(small_mesh.points, small_mesh.tets)
-    V = rng.normal(size=small_mesh.n_nodes)
-    sigma = rng.uniform(0.1, 1.0, small_mesh.n_tets)
-    q = joule_heat(gradient_matrix(geom, small_mesh.tets, small_mesh.n_nodes), sigma, V)
-    for e in rng.choice(small_mesh.n_tets, 10, replace=False):
-        tet = small_mesh.tets[e]
-        C = np.linalg.inv(np.column_stack([np.ones(4), small_mesh.points[tet]]))
-        grad = C[1:, :] @ V[tet]
-        assert q[e] == pytest.approx(sigma[e] * grad @ grad, rel=1e-10)
+    """sigma |grad V|^2 of every tet from node differences equals the element formula's, on a
+    uniform and a graded grid, per-tet and one conductivity."""
+    graded = build_tet_mesh(
+        Grid.from_axes(
+            [0.0, 0.4e-3, 1e-3, 3e-3], [0.0, 2e-3, 2.5e-3, 6e-3], [0.0, 5e-3, 6e-3, 6.4e-3]
+        )
+    )
+    for mesh in (small_mesh, graded):
+        V = rng.normal(size=mesh.n_nodes)
+        sigma = rng.uniform(0.1, 1.0, mesh.n_tets)
+        q = joule_heat(mesh.grid, sigma, V)
+        ref = np.empty(mesh.n_tets)
+        for e, tet in enumerate(mesh.tets):
+            C = np.linalg.inv(np.column_stack([np.ones(4), mesh.points[tet]]))
+            grad = C[1:, :] @ V[tet]
+            ref[e] = grad @ grad
+        assert np.allclose(q, sigma * ref, rtol=1e-10, atol=0)
+        assert np.allclose(joule_heat(mesh.grid, 0.5, V), 0.5 * ref, rtol=1e-10, atol=0)
 
 
 def test_joule_heat_equals_delivered_power(paper_meshes):
@@ -111,7 +120,7 @@ def test_joule_heat_equals_delivered_power(paper_meshes):
         sol = DrivenPotential(solver).solve(
             sigma, contact_weights(mesh, PAPER_CENTER, A_M), ElectrodeDrive()
         )
-        q = joule_heat(gradient_matrix(geom, mesh.tets, mesh.n_nodes), sigma, sol.V)
+        q = joule_heat(mesh.grid, sigma, sol.V)
         assert np.dot(q, geom.volumes) == pytest.approx(sol.power_w, rel=1e-12)
         assert sol.power_w == pytest.approx(delivered_power(sol.load, sol.V), rel=1e-8)
         assert sol.current_a == pytest.approx(J0 * np.pi * A_M**2, rel=1e-10)
@@ -124,9 +133,7 @@ def test_constant_power_hits_its_target(paper_meshes):
     contact = contact_weights(mesh, PAPER_CENTER, A_M)
     for target in (50.0, 5.0):
         sol = driven.solve(SIGMA, contact, ElectrodeDrive(mode="power", power_w=target))
-        q = joule_heat(
-            gradient_matrix(geom, mesh.tets, mesh.n_nodes), np.full(mesh.n_tets, SIGMA), sol.V
-        )
+        q = joule_heat(mesh.grid, np.full(mesh.n_tets, SIGMA), sol.V)
         assert sol.power_w == pytest.approx(target, rel=1e-12)
         assert np.dot(q, geom.volumes) == pytest.approx(target, rel=1e-6)
     assert solver.krylov.n_solves == 1  # one unit-current solve serves both targets
@@ -209,10 +216,10 @@ def test_energy_guard_accepts_a_potential_within_its_tolerance(paper_meshes, tol
     assert 0 < guarded.stats.iterations < exact.stats.iterations
     # whatever the accuracy, the drive's power is the guarded field's own Joule heat
     geom = setup(mesh)[0]
-    q = joule_heat(gradient_matrix(geom, mesh.tets, mesh.n_nodes), sigma, guarded.V)
+    q = joule_heat(mesh.grid, sigma, guarded.V)
     assert np.dot(q, geom.volumes) == pytest.approx(guarded.power_w, rel=1e-12)
     powered = DrivenPotential(solver).solve(sigma, contact, ElectrodeDrive("power", power_w=30.0))
-    q = joule_heat(gradient_matrix(geom, mesh.tets, mesh.n_nodes), sigma, powered.V)
+    q = joule_heat(mesh.grid, sigma, powered.V)
     assert np.dot(q, geom.volumes) == pytest.approx(30.0, rel=1e-12)
     _, plain = setup(mesh)
     assert plain.energy_tolerance is None  # the default solver solves to rtol

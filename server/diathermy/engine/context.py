@@ -71,7 +71,6 @@ class EngineContext:
             stiffness=stiffness,
             potential=self.potential,
             heat=self.heat,
-            gradient_op=self.disc.gradient,
         )
         self.conductivity_law = ConductivityLaw()
         self.damage_law = ArrheniusDamage()

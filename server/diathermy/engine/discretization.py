@@ -10,7 +10,6 @@ import scipy.sparse as sp
 
 from diathermy.fem.geometry import (
     ElementGeometry,
-    gradient_matrix,
     nodal_volumes,
     structured_geometry,
     tet_mean_matrix,
@@ -30,7 +29,6 @@ class Discretization:
     node_volumes_m3: np.ndarray  # (n_nodes,)
     outer_faces: np.ndarray  # (n_faces, 3) all six sides, convective boundary
     bottom_nodes: np.ndarray  # grounded (V = 0) and clamped (u = 0)
-    gradient: sp.csr_matrix  # (3 n_tets, n_nodes) element-wise gradient of a nodal field
 
     @property
     def n_nodes(self) -> int:
@@ -62,5 +60,4 @@ def build_discretization(grid: Grid) -> Discretization:
         node_volumes_m3=nodal_volumes(geom, mesh.tets, mesh.n_nodes),
         outer_faces=np.concatenate([mesh.boundary_faces[s] for s in SIDES]),
         bottom_nodes=mesh.side_nodes("z-"),
-        gradient=gradient_matrix(geom, mesh.tets, mesh.n_nodes),
     )

@@ -33,25 +33,6 @@ def gradient(geom: ElementGeometry, tets: np.ndarray, u: np.ndarray) -> np.ndarr
     return np.einsum("ea,eak->ek", u[tets], geom.grads)
 
 
-def gradient_matrix(geom: ElementGeometry, tets: np.ndarray, n_nodes: int) -> sp.csr_matrix:
-    """The element-wise gradient as a sparse matrix (3 n_tets, n_nodes) in 1/m: row 3e + k of
-    ``G @ u`` is d u / d x_k on tet e, the same numbers as ``gradient``.
-
-    Zero shape-function gradients (and round-off below 1e-12 of the tet's largest) are left
-    out: a Kuhn tet's gradient along each axis is the difference of two of its nodes over the
-    cell size, so the matrix holds 6 entries per tet (72 bytes), and one product costs about
-    half of the gather-and-einsum of ``gradient``.
-    """
-    n = tets.shape[0]
-    g = geom.grads.transpose(0, 2, 1)  # (n, 3, 4): row k holds the 4 nodes' d N_a / d x_k
-    rows = np.broadcast_to(np.arange(3 * n).reshape(n, 3, 1), g.shape)
-    cols = np.broadcast_to(tets[:, None, :], g.shape)
-    keep = np.abs(g) > 1e-12 * np.abs(g).max(axis=(1, 2), keepdims=True)
-    return sp.csr_matrix(
-        (g[keep], (rows[keep], cols[keep].astype(np.int32))), shape=(3 * n, n_nodes)
-    )
-
-
 def tet_mean_matrix(tets: np.ndarray, n_nodes: int) -> sp.csr_matrix:
     """The mean of the 4 nodal values per tet as a sparse matrix (n_tets, n_nodes): ``P @ v`` is
     ``v[tets].mean(axis=1)`` for a nodal scalar v, at about 2.5x the gather's speed (measured on

@@ -36,18 +36,23 @@ from diathermy.fem.energy_cg import EnergyCG, energy_cg
 from diathermy.fem.multigrid import SCALAR_AMG_OPTIONS, scaled_candidates, unit_diagonal
 from diathermy.fem.solvers import KrylovSolver, ReuseState, SolveStats
 from diathermy.fem.window_box import choose_box, nodes_in_box
-from diathermy.mesh import TetMesh
+from diathermy.mesh import Grid, TetMesh
+from diathermy.mesh.kuhn_gradient import axis_differences, per_tet, shape_gradient
 
 
-def joule_heat(gradient: sp.csr_matrix, sigma: np.ndarray, V: np.ndarray) -> np.ndarray:
-    """Joule heat q = sigma |grad V|^2 per tet (n_tets,) in W/m^3.
+def joule_heat(grid: Grid, sigma: np.ndarray | float, V: np.ndarray) -> np.ndarray:
+    """Joule heat q = sigma |grad V|^2 per tet (n_tets,) in W/m^3 of the Kuhn mesh of ``grid``.
 
-    gradient: the mesh's ``fem.geometry.gradient_matrix`` (3 n_tets, n_nodes) in 1/m;
-    sigma (n_tets,) in S/m; V (n_nodes,) in V.
+    sigma per tet (n_tets,) or one number in S/m; V (n_nodes,) in V. The gradient of each tet
+    from node differences (``mesh.kuhn_gradient``), no gather and no stored gradient matrix.
     """
-    g = gradient @ V
-    g *= g
-    return sigma * (g.reshape(-1, 3) @ np.ones(3))
+    diffs = axis_differences(V, grid)
+    sig = per_tet(sigma, grid)
+    out = np.empty(sig.shape)
+    for s in range(6):
+        gx, gy, gz = shape_gradient(diffs, s)
+        out[..., s] = sig[..., s] * (gx * gx + gy * gy + gz * gz)
+    return out.reshape(-1)
 
 
 def delivered_power(load: np.ndarray, V: np.ndarray) -> float:

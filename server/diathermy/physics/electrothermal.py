@@ -32,7 +32,7 @@ import scipy.sparse.linalg as spla
 
 from diathermy.errors import SolverDivergedError
 from diathermy.fem.edges import EdgeStiffness, edge_stiffness
-from diathermy.fem.geometry import ElementGeometry, gradient, gradient_matrix
+from diathermy.fem.geometry import ElementGeometry, gradient
 from diathermy.fem.gmres import RightGMRES
 from diathermy.fem.multigrid import scaled_amg_preconditioner
 from diathermy.mesh import TetMesh
@@ -78,7 +78,6 @@ class ElectroThermal:
         stiffness: its edge couplings (built here if not given).
         potential_rtol, heat_rtol: relative residuals of the two solves.
         h_w_per_m2_k, t_ambient_k, monotone, heat_preconditioner: see ``HeatStepper``.
-        gradient_op: the mesh's ``gradient_matrix`` (built here if not given).
     """
 
     def __init__(
@@ -95,15 +94,9 @@ class ElectroThermal:
         heat_preconditioner: Literal["auto", "jacobi", "amg"] = "auto",
         potential: DrivenPotential | None = None,
         heat: HeatStepper | None = None,
-        gradient_op: sp.csr_matrix | None = None,
     ) -> None:
         stiffness = stiffness or edge_stiffness(geom, mesh.tets, mesh.n_nodes)
         self.mesh, self.geom = mesh, geom
-        self.gradient = (
-            gradient_op
-            if gradient_op is not None
-            else gradient_matrix(geom, mesh.tets, mesh.n_nodes)
-        )
         self.potential = potential or DrivenPotential(
             PotentialSolver(mesh, stiffness, rtol=potential_rtol)
         )
@@ -138,7 +131,7 @@ class ElectroThermal:
         V1, load1, R, pot_stats = self.potential.unit_field(sig, contact)
         current = drive_current(drive, contact.area_m2, R)
         if self._unit_joule is None or self._unit_joule[0] is not V1:  # q, load scale with I^2
-            q1 = joule_heat(self.gradient, sig, V1)
+            q1 = joule_heat(self.mesh.grid, sig, V1)
             self._unit_joule = (V1, q1, self.heat.hmesh.joule_load(q1))
         _, q1, joule1 = self._unit_joule
         q, V = current**2 * q1, current * V1
@@ -212,7 +205,7 @@ class ElectroThermal:
             V_star = V * (I_star / current)
             x0 = np.concatenate([V_star[free], x[n_f:]])
         T_new = x[n_f:]
-        q = joule_heat(self.gradient, sig, V)
+        q = joule_heat(self.mesh.grid, sig, V)
         joule = self.heat.hmesh.joule_load(q)
         self._last = (V, current)
         heat_stats = HeatStepStats(

@@ -88,7 +88,7 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
     # q is quadratic in the current: the unit field's Joule heat (and, for the heat step, its
     # nodal load) is computed once per unit field and scaled by I^2 while the field is reused
     i2 = sol.current_a**2
-    q1 = ctx.potential.per_unit("joule_heat", lambda V1: joule_heat(ctx.disc.gradient, sigma, V1))
+    q1 = ctx.potential.per_unit("joule_heat", lambda V1: joule_heat(ctx.disc.grid, sigma, V1))
     fields = {"potential": sol.V, "joule_heat": i2 * q1}
     handoff: dict[str, Any] = {"delivered_power_w": sol.power_w}
     if ctx.has("thermal"):
