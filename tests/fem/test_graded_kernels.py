@@ -13,13 +13,12 @@ from diathermy.fem.geometry import (
     element_geometry,
     gradient,
     structured_geometry,
-    tet_mean_matrix,
 )
 from diathermy.fem.scalar import assemble_diffusion, volume_load, volume_load_matrix
 from diathermy.fem.sparsity import build_pattern
 from diathermy.mesh import Grid, TetMesh, build_tet_mesh
 from diathermy.mesh.grading import graded_axis
-from diathermy.mesh.kuhn_gradient import axis_differences, shape_gradient
+from diathermy.mesh.kuhn_fields import axis_differences, shape_gradient, tet_mean
 
 
 @pytest.fixture(scope="module")
@@ -58,7 +57,7 @@ def test_tet_operators_as_matrices_equal_their_element_formulas(graded, graded_m
     load = volume_load_matrix(geom, m.tets, m.n_nodes) @ q
     assert np.allclose(load, by_bincount, rtol=0, atol=1e-14 * np.abs(by_bincount).max())
     assert np.allclose(volume_load(geom, m.tets, m.n_nodes, q), load, rtol=0, atol=0)
-    mean = tet_mean_matrix(m.tets, m.n_nodes) @ u
+    mean = tet_mean(u, m.grid)
     assert np.allclose(mean, u[m.tets].mean(axis=1), rtol=0, atol=1e-15 * np.abs(u).max())
 
 

@@ -3,16 +3,13 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 
 import numpy as np
-import scipy.sparse as sp
 
 from diathermy.fem.geometry import (
     ElementGeometry,
     nodal_volumes,
     structured_geometry,
-    tet_mean_matrix,
 )
 from diathermy.fem.sparsity import Pattern, build_pattern
 from diathermy.mesh import SIDES, Grid, TetMesh, build_tet_mesh
@@ -37,11 +34,6 @@ class Discretization:
     @property
     def n_tets(self) -> int:
         return self.mesh.n_tets
-
-    @cached_property
-    def tet_mean(self) -> sp.csr_matrix:
-        """(n_tets, n_nodes): a nodal scalar field's mean per tet, built on first use."""
-        return tet_mean_matrix(self.mesh.tets, self.mesh.n_nodes)
 
     def to_grid(self, nodal: np.ndarray) -> np.ndarray:
         """Nodal (n_nodes,) or (n_nodes, 3) -> grid-shaped (nz, ny, nx[, 3])."""

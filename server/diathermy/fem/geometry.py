@@ -5,7 +5,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 
 
 @dataclass(frozen=True)
@@ -31,18 +30,6 @@ def element_geometry(points: np.ndarray, tets: np.ndarray) -> ElementGeometry:
 def gradient(geom: ElementGeometry, tets: np.ndarray, u: np.ndarray) -> np.ndarray:
     """Element-wise gradient (n_tets, 3) of a nodal P1 field u (n_nodes,)."""
     return np.einsum("ea,eak->ek", u[tets], geom.grads)
-
-
-def tet_mean_matrix(tets: np.ndarray, n_nodes: int) -> sp.csr_matrix:
-    """The mean of the 4 nodal values per tet as a sparse matrix (n_tets, n_nodes): ``P @ v`` is
-    ``v[tets].mean(axis=1)`` for a nodal scalar v, at about 2.5x the gather's speed (measured on
-    393k tets: 3.1 against 7.8 ms)."""
-    n = tets.shape[0]
-    index = np.int32 if 4 * n < np.iinfo(np.int32).max else np.int64
-    return sp.csr_matrix(
-        (np.full(4 * n, 0.25), tets.ravel().astype(index), np.arange(0, 4 * n + 1, 4, dtype=index)),
-        shape=(n, n_nodes),
-    )
 
 
 def nodal_volumes(geom: ElementGeometry, tets: np.ndarray, n_nodes: int) -> np.ndarray:

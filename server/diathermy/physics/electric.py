@@ -37,22 +37,25 @@ from diathermy.fem.multigrid import SCALAR_AMG_OPTIONS, scaled_candidates, unit_
 from diathermy.fem.solvers import KrylovSolver, ReuseState, SolveStats
 from diathermy.fem.window_box import choose_box, nodes_in_box
 from diathermy.mesh import Grid, TetMesh
-from diathermy.mesh.kuhn_gradient import axis_differences, per_tet, shape_gradient
+from diathermy.mesh.kuhn_fields import axis_differences, per_tet, shape_gradient, shapes_last
 
 
 def joule_heat(grid: Grid, sigma: np.ndarray | float, V: np.ndarray) -> np.ndarray:
     """Joule heat q = sigma |grad V|^2 per tet (n_tets,) in W/m^3 of the Kuhn mesh of ``grid``.
 
     sigma per tet (n_tets,) or one number in S/m; V (n_nodes,) in V. The gradient of each tet
-    from node differences (``mesh.kuhn_gradient``), no gather and no stored gradient matrix.
+    from node differences (``mesh.kuhn_fields``), no gather and no stored gradient matrix.
     """
     diffs = axis_differences(V, grid)
     sig = per_tet(sigma, grid)
-    out = np.empty(sig.shape)
+    out = np.empty((6, *sig.shape[:3]))
     for s in range(6):
         gx, gy, gz = shape_gradient(diffs, s)
-        out[..., s] = sig[..., s] * (gx * gx + gy * gy + gz * gz)
-    return out.reshape(-1)
+        np.multiply(gx, gx, out=out[s])
+        out[s] += gy * gy
+        out[s] += gz * gz
+        out[s] *= sig[..., s]
+    return shapes_last(out)
 
 
 def delivered_power(load: np.ndarray, V: np.ndarray) -> float:

@@ -16,6 +16,7 @@ from diathermy.engine.electrodes import ElectrodePose
 from diathermy.engine.report import EffectReport
 from diathermy.engine.state import ContactKey, SimulationState
 from diathermy.engine.step import MonolithicRequest, Outcome, Step
+from diathermy.mesh.kuhn_fields import tet_mean
 from diathermy.physics.contact_load import ContactWeights
 from diathermy.physics.electric import joule_heat
 from diathermy.physics.tissue_effects import electrical_conductivity
@@ -33,7 +34,7 @@ def conductivity(ctx: EngineContext, state: SimulationState) -> np.ndarray:
         sigma_n = electrical_conductivity(
             state["temperature"], state["vapor_fraction"], t, ctx.conductivity_law
         )
-        sigma = ctx.disc.tet_mean @ sigma_n
+        sigma = tet_mean(sigma_n, ctx.disc.grid)
     else:
         sigma = np.full(ctx.disc.n_tets, t.sigma_s_per_m)
     sigma[state["removed"]] = t.sigma_removed_s_per_m

@@ -13,6 +13,7 @@ from diathermy.engine.context import EngineContext
 from diathermy.engine.report import EffectReport
 from diathermy.engine.state import SimulationState
 from diathermy.engine.step import Outcome, Step, skipped
+from diathermy.mesh.kuhn_fields import tet_mean
 from diathermy.physics.properties import effective_conductivity, volumetric_heat_capacity
 
 
@@ -29,7 +30,7 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
     x = state["vapor_fraction"]
     rho_c = volumetric_heat_capacity(x, state["pressure"], step.T_old, t)
     if x.any():
-        k = ctx.disc.tet_mean @ effective_conductivity(x, t)
+        k = tet_mean(effective_conductivity(x, t), ctx.disc.grid)
     else:  # no vapor yet: the liquid-phase mixture everywhere
         k = np.full(ctx.disc.n_tets, float(effective_conductivity(0.0, t)))
     k[state["removed"]] = t.k_vapor_w_per_m_k

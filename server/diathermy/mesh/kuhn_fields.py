@@ -1,10 +1,11 @@
-"""Per-tet gradients of nodal fields on a Kuhn mesh, from node differences along the grid axes.
+"""Per-tet values of nodal fields on a Kuhn mesh (gradients, means) from slices of the node grid.
 
 A Kuhn tet runs 000 -> e_a -> e_a + e_b -> 111 through its cell, so its gradient along axis a is
 the difference of the field along the one a-edge of the cell that the path takes, over the
-cell's length. The differences of the nodal field along each axis, sliced per shape, give every
-tet's gradient without a gather or a sparse product (the gradient matrix's 6 entries per tet
-took 80 MB on the fixed electrode's 958 k tets, and each product read them all).
+cell's length, and its mean is that of the 4 cell corners on the path. Differences and corner
+values of the nodal grid, sliced per shape, give every tet's value without a gather or a stored
+sparse operator (the gradient matrix's 6 entries per tet took 80 MB on the fixed electrode's
+958 k tets, the tet-mean matrix's 4 about 50 MB, and each product read them all).
 """
 
 from __future__ import annotations
@@ -59,3 +60,28 @@ def per_tet(values: np.ndarray | float, grid: Grid) -> np.ndarray:
     return np.broadcast_to(np.asarray(values, dtype=float), (cz * cy * cx * 6,)).reshape(
         cz, cy, cx, 6
     )
+
+
+def tet_mean(f: np.ndarray, grid: Grid) -> np.ndarray:
+    """The mean of a nodal scalar f (n_nodes,) over each tet's 4 nodes (n_tets,), TetMesh order:
+    the cell's 000 and 111 corners, which every shape shares, and the shape's two others."""
+    nz, ny, nx = grid.shape
+    cz, cy, cx = nz - 1, ny - 1, nx - 1
+    g = np.asarray(f, dtype=float).reshape(nz, ny, nx)
+
+    def corner(ox: int, oy: int, oz: int) -> np.ndarray:
+        return g[oz : oz + cz, oy : oy + cy, ox : ox + cx]
+
+    ends = corner(0, 0, 0) + corner(1, 1, 1)
+    out = np.empty((6, cz, cy, cx))  # shape first: contiguous writes, one transposing copy
+    for s, corners in enumerate(kuhn_corners()):
+        a, b = (tuple(int(v) for v in c) for c in corners if 0 < c.sum() < 3)
+        np.add(ends, corner(*a), out=out[s])
+        out[s] += corner(*b)
+    out *= 0.25
+    return shapes_last(out)
+
+
+def shapes_last(by_shape: np.ndarray) -> np.ndarray:
+    """(6, cz, cy, cx) per shape -> (n_tets,) in TetMesh order (tet 6 cell + shape)."""
+    return np.moveaxis(by_shape, 0, -1).reshape(-1)
