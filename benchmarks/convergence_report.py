@@ -86,7 +86,17 @@ def summary(d: dict[str, np.ndarray]) -> dict[str, float]:
         "step_median": float(np.median(d["wall_s"][1:] if t.size > 1 else d["wall_s"])),
         "rss": float(d["max_rss_mib"]),
         "nodes": float(d["n_nodes"]),
+        "leaves": leaves_fine_region(d),
     }
+
+
+def leaves_fine_region(d: dict[str, np.ndarray]) -> float:
+    """The first time in s the crater's floor lies below the graded grid's working region
+    (``depth_mm``; from then on it digs in coarser cells); NaN: it never did, or no region."""
+    region_m = float(d["depth_mm"]) * 1e-3 if "depth_mm" in d else 0.0
+    if region_m <= 0:
+        return math.nan
+    return _first(d["time_s"], d["depth_m"] > region_m)
 
 
 def _probe_lines() -> list[str]:
@@ -258,8 +268,8 @@ def _surface_lines(
         "",
         "| grid | surface mm | nodes | 100 C interp. s | first cut interp. s | first cut / finest | "
         + " | ".join(f"cut {t:g} s mm^3 | / finest" for t in times)
-        + " |",
-        "|---|---:|---:|---:|---:|---:|" + "---:|---:|" * len(times),
+        + " | crater leaves the fine region s |",
+        "|---|---:|---:|---:|---:|---:|" + "---:|---:|" * len(times) + "---:|",
     ]
     fin = summary(runs[top])
     by_fine = {float(runs[k]["fine_mm"]): k for k in plain}
@@ -280,8 +290,16 @@ def _surface_lines(
                 f"{_fmt(s_['t100_interp'], 1.0, 4)} | {_fmt(s_['cut_interp'], 1.0, 4)} | "
                 f"{_fmt(s_['cut_interp'] / fin['cut_interp'], 1.0, 3)} | "
                 + " | ".join(cells)
-                + " |"
+                + f" | {_fmt(s_['leaves'])} |"
             )
+    if math.isfinite(fin["leaves"]):
+        lines.append(
+            f"\nThe crater's floor passes the working region's depth ({float(runs[top]['depth_mm']):g}"
+            f" mm) at the time in the last column and digs on in cells that grow by the growth "
+            f"ratio: from then on a run is no longer at its fine spacing, the finest refined run "
+            f"from {fin['leaves']:.2f} s. Its later figures are a lower bound on a run fine all "
+            f"the way down (coarser cells drill slower, above)."
+        )
     if len(keys) >= 3:
         a, b, c = (summary(runs[k]) for k in keys[-3:])
 
@@ -486,8 +504,9 @@ def report() -> None:
         "",
         "| grid | nodes | t end s | P W (step 1) | P / ref | 100 C step s | 100 C interp. s "
         "| first cut step s | first cut interp. s | cut 3 s mm^3 | depth 3 s mm | cut 6 s mm^3 "
-        "| depth 6 s mm | peak p kPa | median step s | max RSS MiB |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| depth 6 s mm | crater leaves the fine region s | peak p kPa | median step s "
+        "| max RSS MiB |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for k in fixed:
         s = sums[k]
@@ -497,7 +516,8 @@ def report() -> None:
             f"{_fmt(s['t100_interp'], 1.0, 3)} | {_fmt(s['first_cut'])} | "
             f"{_fmt(s['cut_interp'], 1.0, 3)} | {_fmt(s['cut3'], 1e9)} | "
             f"{_fmt(s['depth3'], 1e3)} | {_fmt(s['cut6'], 1e9)} | {_fmt(s['depth6'], 1e3)} | "
-            f"{s['p_peak'] / 1e3:.0f} | {s['step_median']:.2f} | {s['rss']:.0f} |"
+            f"{_fmt(s['leaves'])} | {s['p_peak'] / 1e3:.0f} | {s['step_median']:.2f} | "
+            f"{s['rss']:.0f} |"
         )
     graded = [k for k in fixed if float(runs[k]["fine_mm"]) > 0]
     ends = sorted({round(sums[k]["t_end"], 6) for k in graded})

@@ -100,7 +100,8 @@ class EffectReport(_Result):
 
 
 class StepReport(_Result):
-    """What one step did: per-effect reports, delivered power W, maxima, the cut's volume m^3."""
+    """What one step did: per-effect reports, delivered power W, maxima, the cut's volume m^3,
+    and how far (m) the cut and the vapor reach beyond a graded grid's fine working region."""
 
     step: int
     time_s: float
@@ -113,6 +114,7 @@ class StepReport(_Result):
     max_strain_energy_j_per_m3: float | None = 0.0
     cut_volume_m3: float | None = 0.0
     crater_depth_m: float | None = 0.0
+    beyond_fine_region_m: dict[str, float] = {}
     energy: dict[str, float | None] = {}
 
 

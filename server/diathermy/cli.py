@@ -57,6 +57,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         progress=not args.quiet,
     )
     print(summary)
+    if (warning := summary.warning()) is not None:
+        print(warning, file=sys.stderr)
     return 0
 
 

@@ -157,7 +157,7 @@ def test_surface_refined_ladder_sits_beside_the_plain_runs(
     runs = {
         "fixed_0.4mm": run(0.4, 0.0, 0.8, 0.03),
         "fixed_0.4mm_s0.1": run(0.4, 0.1, 0.95, 0.02),
-        "fixed_0.2mm_s0.05": run(0.2, 0.05, 1.0, 0.02),
+        "fixed_0.2mm_s0.05": run(0.2, 0.05, 1.0, 0.02) | {"depth_mm": np.array(2.0)},
     }
     text = "\n".join(
         report._surface_lines(runs, ["fixed_0.4mm_s0.1", "fixed_0.2mm_s0.05"], ["fixed_0.4mm"])
@@ -166,8 +166,20 @@ def test_surface_refined_ladder_sits_beside_the_plain_runs(
     assert "cut 1.62 s mm^3 | / finest | cut 3 s mm^3 | / finest |" in text
     rows = [r for r in text.splitlines() if r.startswith("| 0.")]
     assert [r.split(" | ")[1] for r in rows] == ["0", "0.1", "0.05"]  # plain beside refined
-    assert "| 0.4 mm | 0 | 1000 | 0.0300 | 0.0600 | 1.000 | 1.30 | 0.800 | 2.40 | 0.800 |\n" in text
-    assert "| 0.4 mm | 0.1 | 1000 | 0.0200 | 0.0600 | 1.000 | 1.54 | 0.950 | 2.85 | 0.950 |" in text
+    assert (
+        "| 0.4 mm | 0 | 1000 | 0.0300 | 0.0600 | 1.000 | 1.30 | 0.800 | 2.40 | 0.800 | — |\n"
+        in text
+    )
+    assert (
+        "| 0.4 mm | 0.1 | 1000 | 0.0200 | 0.0600 | 1.000 | 1.54 | 0.950 | 2.85 | 0.950 | — |"
+        in text
+    )
+    # the finest run's crater (1 mm/s) passes its 2 mm deep region in the step after 2 s
+    assert (
+        "| 0.2 mm | 0.05 | 1000 | 0.0200 | 0.0600 | 1.000 | 1.62 | 1.000 | 3.00 | 1.000 | 2.01 |"
+        in text
+    )
+    assert "the finest refined run from 2.01 s" in text
 
 
 def test_surface_cost_steps_both_grids_and_reports_the_ratio(

@@ -176,3 +176,30 @@ def test_dataset_samples_refuse_a_graded_scene(tmp_path):
 
     with pytest.raises(ValueError, match="tiny use a graded grid"):
         write_scene_samples([graded_scene()], tmp_path / "d.h5", n_steps=1)
+
+
+def test_reports_say_when_the_cut_leaves_the_fine_region(tmp_path):
+    """The region is 1.5 mm deep; the crater passes it by step ~16. Each report gives how far the
+    cut's deepest node lies beyond it: below the crater's floor (which lies between that node and
+    the next one down, at most one 2 mm cell away), 0 while the floor is within the region."""
+    scene = graded_scene(steps=25)
+    summary = run_scene(scene, out=tmp_path / "r.h5", progress=False)
+    reports = read_run(tmp_path / "r.h5")["reports"]
+    depth_m = RES.depth_m
+    beyond = [r["beyond_fine_region_m"]["cut"] for r in reports]
+    assert beyond[0] == 0.0 and beyond[-1] > 0
+    for r, b in zip(reports, beyond, strict=True):
+        floor = r["crater_depth_m"] - depth_m  # the crater floor below the region, m
+        assert b <= max(floor, 0.0) + 1e-12  # the deepest cut node lies above the floor...
+        if b > 0:
+            assert floor - b < RES.max_cell_m  # ...and the floor above the next node down
+    first = next(r["time_s"] for r, b in zip(reports, beyond, strict=True) if b > 0)
+    assert summary.left_fine_region["cut"] == (first, max(beyond))
+    assert "cut from t = " in summary.warning() and "resolution.depth_m" in summary.warning()
+
+
+def test_a_uniform_grid_has_no_fine_region_to_leave(tmp_path):
+    summary = run_scene(tiny_scene(steps=20), out=tmp_path / "u.h5", progress=False)
+    assert summary.cut_volume_m3 > 0  # it cut, and there is no region to report against
+    assert read_run(tmp_path / "u.h5")["reports"][-1]["beyond_fine_region_m"] == {}
+    assert summary.left_fine_region == {} and summary.warning() is None

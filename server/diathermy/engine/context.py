@@ -41,6 +41,7 @@ class EngineContext:
         self.disc: Discretization = build_discretization(scene.node_grid())
         mesh, geom = self.disc.mesh, self.disc.geom
         self.top_z = float(self.disc.grid.origin_m[2] + self.disc.grid.size_m[2])
+        self.working_region = scene.working_region()  # where the graded grid is fine
         stiffness = edge_stiffness(geom, mesh.tets, mesh.n_nodes)
         self.potential = DrivenPotential(
             # a cut or desiccation changes sigma on a few tets: the AMG hierarchy is kept while

@@ -21,6 +21,7 @@ from diathermy.engine.changes import ChangeSet, PendingChanges
 from diathermy.engine.context import EngineContext
 from diathermy.engine.effects import EFFECTS
 from diathermy.engine.electrodes import electrode_pose
+from diathermy.engine.fine_region import beyond_fine_region
 from diathermy.engine.report import StepReport
 from diathermy.engine.state import SimulationState
 from diathermy.engine.step import Outcome, Step
@@ -92,7 +93,7 @@ def run_step(ctx: EngineContext, state: SimulationState, calls: Counter[str]) ->
     state.step += 1
     state.time_s = state.step * step.dt  # no drift from summing dt
     rep.delivered_power_w = step.delivered_power_w
-    finish_report(rep, state)
+    finish_report(rep, state, ctx)
     replaced = {k: v for k, v in state.arrays.items() if v is not start[k]}
     changes = PendingChanges(
         {k: start[k] for k in replaced},
@@ -103,7 +104,7 @@ def run_step(ctx: EngineContext, state: SimulationState, calls: Counter[str]) ->
     return StepResult(rep, changes, by_effect)
 
 
-def finish_report(rep: StepReport, state: SimulationState) -> None:
+def finish_report(rep: StepReport, state: SimulationState, ctx: EngineContext) -> None:
     """The key figures of the state after the step, and the energy ledger."""
     rep.max_temperature_k = float(state["temperature"].max())
     rep.max_pressure_pa = float(state["pressure"].max())
@@ -113,4 +114,7 @@ def finish_report(rep: StepReport, state: SimulationState) -> None:
     if topology is not None:
         rep.cut_volume_m3 = topology.cut_volume_m3
         rep.crater_depth_m = topology.crater_depth_m
+    rep.beyond_fine_region_m = beyond_fine_region(
+        ctx.disc.grid, ctx.working_region, state["level_set"], state["vapor_fraction"]
+    )
     rep.energy = state.energy.report()

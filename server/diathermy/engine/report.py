@@ -19,7 +19,10 @@ class EffectReport:
 
 @dataclass
 class StepReport:
-    """The report of one step; ``to_dict`` gives the JSON record stored in run files."""
+    """The report of one step; ``to_dict`` gives the JSON record stored in run files.
+
+    ``beyond_fine_region_m``: how far the cut and the vapor reach beyond a graded grid's working
+    region, in m (0: inside; empty on a uniform grid; ``engine.fine_region``)."""
 
     step: int
     time_s: float
@@ -32,6 +35,7 @@ class StepReport:
     max_strain_energy_j_per_m3: float = 0.0
     cut_volume_m3: float = 0.0
     crater_depth_m: float = 0.0
+    beyond_fine_region_m: dict[str, float] = field(default_factory=dict)
     energy: dict[str, float] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from tqdm import tqdm
@@ -27,6 +27,9 @@ class RunSummary:
     max_pressure_pa: float
     cut_volume_m3: float
     crater_depth_m: float
+    left_fine_region: dict[str, tuple[float, float]] = field(default_factory=dict)
+    """What reached beyond the graded grid's working region: name -> (the first time it did,
+    in s; the farthest it reached beyond, in m)."""
 
     def __str__(self) -> str:
         return (
@@ -35,6 +38,29 @@ class RunSummary:
             f"cut {self.cut_volume_m3 * 1e9:.2f} mm^3, crater {self.crater_depth_m * 1e3:.2f} mm "
             f"-> {self.out}"
         )
+
+    def warning(self) -> str | None:
+        """One line on what left the fine working region, None when nothing did."""
+        if not self.left_fine_region:
+            return None
+        parts = ", ".join(
+            f"the {name} from t = {t:.2f} s (up to {far * 1e3:.2f} mm beyond)"
+            for name, (t, far) in self.left_fine_region.items()
+        )
+        return (
+            f"warning: {self.scene}: {parts} left the grid's fine working region, so results "
+            "there are on coarser cells; deepen resolution.depth_m or widen resolution.region_m"
+        )
+
+
+def track_fine_region(
+    left: dict[str, tuple[float, float]], time_s: float, beyond_m: dict[str, float]
+) -> None:
+    """Fold one step's ``StepReport.beyond_fine_region_m`` into ``left`` (see ``RunSummary``)."""
+    for name, far in beyond_m.items():
+        if far > 0:
+            first, farthest = left.get(name, (time_s, 0.0))
+            left[name] = (first, max(farthest, far))
 
 
 def run_scene(
@@ -53,6 +79,7 @@ def run_scene(
     pvd: list[tuple[float, str]] = []
     wall = 0.0
     tmax = pmax = 0.0
+    left: dict[str, tuple[float, float]] = {}
     with RunWriter(out, sim.grid, scene.model_dump_json()) as writer:
         bar = tqdm(total=scene.steps, disable=not progress, unit="step", desc=scene.name)
         for _ in range(scene.steps):
@@ -60,6 +87,7 @@ def run_scene(
             wall += report.wall_s
             tmax = max(tmax, report.max_temperature_k)
             pmax = max(pmax, report.max_pressure_pa)
+            track_fine_region(left, report.time_s, report.beyond_fine_region_m)
             if sim.step_index % every == 0 or sim.step_index == scene.steps:
                 writer.append(
                     time_s=sim.time_s,
@@ -95,4 +123,5 @@ def run_scene(
         max_pressure_pa=pmax,
         cut_volume_m3=last.cut_volume_m3 if last else 0.0,
         crater_depth_m=last.crater_depth_m if last else 0.0,
+        left_fine_region=left,
     )

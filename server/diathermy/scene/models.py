@@ -17,7 +17,12 @@ from diathermy.physics.levelset_law import (
     LevelSetLaw,
 )
 from diathermy.physics.materials import Tissue
-from diathermy.scene.resolution import MAX_GRADED_NODES, Resolution, graded_grid
+from diathermy.scene.resolution import (
+    MAX_GRADED_NODES,
+    Resolution,
+    graded_grid,
+    working_region,
+)
 
 SCHEMA_VERSION: Literal[1] = 1
 
@@ -338,6 +343,15 @@ class Scene(_Model):
         if self.resolution is None:
             return Grid(self.grid, size_m=self.block_m)
         return graded_grid(self.resolution, self.block_m, self.electrodes)
+
+    def working_region(
+        self,
+    ) -> tuple[tuple[float, float, float], tuple[float, float, float]] | None:
+        """The box ((x, y, z) low, high) in m where ``node_grid()`` is fine; None on a uniform
+        grid (equally fine everywhere)."""
+        if self.resolution is None:
+            return None
+        return working_region(self.resolution, self.block_m, self.electrodes)
 
     def on_uniform_grid(self, shape: tuple[int, int, int]) -> Scene:
         """This scene on a uniform grid of ``shape`` nodes (nz, ny, nx): its resolution dropped."""
