@@ -51,7 +51,13 @@ sys.path.insert(0, str(ROOT / "server"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 # the tables and plot of ``report`` live in convergence_report.py
-from convergence_report import DT_S, PROFILE_HALF_WIDTH_M, RESULTS, report  # noqa: E402
+from convergence_report import (  # noqa: E402
+    DT_S,
+    PROFILE_HALF_WIDTH_M,
+    REGION_DEPTH_MM,
+    RESULTS,
+    report,
+)
 
 from diathermy.engine.simulation import Simulation  # noqa: E402
 from diathermy.physics.dissection import cut_driver  # noqa: E402
@@ -73,11 +79,13 @@ def scene_for(
     length_mm: float | None = None,
     contact: str | None = None,
     surface_mm: float | None = None,
+    depth_mm: float | None = None,
 ) -> Scene:
     """The fixed electrode (current-density drive) with its resolution at ``fine_mm`` (0: uniform
     33x33x65), or the moving electrode as shipped (``fine_mm`` None: its own grid); the cut
-    driver's non-local length at ``length_mm``, the electrode's contact model at ``contact`` and
-    the cell height at the top surface at ``surface_mm`` (None: the scene's; 0: fine_mm)."""
+    driver's non-local length at ``length_mm``, the electrode's contact model at ``contact``,
+    the cell height at the top surface at ``surface_mm`` (None: the scene's; 0: fine_mm) and the
+    working region's depth at ``depth_mm`` (None: the scene's)."""
     scene = builtin_scene("moving-electrode" if moving else "fixed-electrode")
     if fine_mm is not None and fine_mm <= 0:
         scene = scene.on_uniform_grid(UNIFORM)
@@ -94,6 +102,8 @@ def scene_for(
     if surface_mm is not None and base.get("resolution") is not None:
         surface = surface_mm * 1e-3 if surface_mm > 0 else None
         base["resolution"] = {**base["resolution"], "surface_m": surface}
+    if depth_mm is not None and base.get("resolution") is not None:
+        base["resolution"] = {**base["resolution"], "depth_m": depth_mm * 1e-3}
     return Scene.model_validate(base)
 
 
@@ -104,15 +114,17 @@ def tag_of(
     length_mm: float = 0.0,
     contact: str = "flat",
     surface_mm: float = 0.0,
+    depth_mm: float = REGION_DEPTH_MM,
 ) -> str:
     """The run's file tag: scene, grid, dt if not the default, the non-local length if any, the
-    contact model if not flat, the surface cell if refined."""
+    contact model if not flat, the surface cell if refined, the region's depth if not 12 mm."""
     kind = "moving" if moving else "fixed"
     grid = "default" if fine_mm is None else "uniform" if fine_mm <= 0 else f"{fine_mm:g}mm"
     tag = f"{kind}_{grid}" + ("" if dt_s == DT_S else f"_dt{dt_s:g}")
     tag += f"_l{length_mm:g}" if length_mm > 0 else ""
     tag += "" if contact == "flat" else f"_{contact}"
-    return tag + (f"_s{surface_mm:g}" if surface_mm > 0 else "")
+    tag += f"_s{surface_mm:g}" if surface_mm > 0 else ""
+    return tag + ("" if depth_mm in (0.0, REGION_DEPTH_MM) else f"_d{depth_mm:g}")
 
 
 def front_strain_energy(sim: Simulation) -> float:
@@ -151,10 +163,11 @@ def run(
     length_mm: float | None = None,
     contact: str | None = None,
     surface_mm: float | None = None,
+    depth_mm: float | None = None,
 ) -> Path:
     scene = scene_for(
         fine_mm, moving=moving, dt_s=dt_s, length_mm=length_mm, contact=contact,
-        surface_mm=surface_mm,
+        surface_mm=surface_mm, depth_mm=depth_mm,
     )  # fmt: skip
     length_mm = scene.level_set.nonlocal_length_m * 1e3
     contact = scene.electrodes[0].contact
@@ -204,7 +217,10 @@ def run(
             break
     if not moving:
         profiles["profile_end"] = crater_profile(sim, centre)
-    tag = tag_of(fine_mm, moving, dt_s, length_mm, contact, surface_mm)
+    tag = tag_of(
+        fine_mm, moving, dt_s, length_mm, contact, surface_mm,
+        REGION_DEPTH_MM if depth_mm is None else depth_mm,
+    )  # fmt: skip
     out = RESULTS / f"convergence_{tag}.npz"
     arrays: dict[str, Any] = {**{k: np.asarray(v) for k, v in rec.items()}, **profiles}
     np.savez(
@@ -408,6 +424,11 @@ def main(argv: list[str] | None = None) -> int:
         help="cell height at the top surface over the working region (default: the scene's; "
         "0: the fine spacing up to the surface)",
     )
+    r.add_argument(
+        "--depth-mm",
+        type=float,
+        help=f"the working region's depth (default: the scene's, {REGION_DEPTH_MM:g} mm)",
+    )
     pw = sub.add_parser("power")
     pw.add_argument("--fine-mm", type=float, nargs="+", required=True)
     mj = sub.add_parser("main-job")
@@ -435,6 +456,7 @@ def main(argv: list[str] | None = None) -> int:
             length_mm=a.length_mm,
             contact=a.contact,
             surface_mm=a.surface_mm,
+            depth_mm=a.depth_mm,
         )
     elif a.cmd == "cost":
         surface_cost(a.fine_mm, a.surface_mm, a.warm, a.steps)

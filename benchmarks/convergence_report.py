@@ -37,6 +37,9 @@ T_BOIL_K = 373.15
 T_INITIAL_K = 310.15
 DT_S = 0.03
 """The fixed electrode's time step (``run --dt``'s default); other runs are the dt study."""
+REGION_DEPTH_MM = 12.0
+"""The fixed electrode's working region's depth (``run --depth-mm``'s default); runs with
+another are the reference-depth check."""
 
 
 def _first(time_s: np.ndarray, mask: np.ndarray) -> float:
@@ -88,6 +91,17 @@ def summary(d: dict[str, np.ndarray]) -> dict[str, float]:
         "nodes": float(d["n_nodes"]),
         "leaves": leaves_fine_region(d),
     }
+
+
+def _region_mm(d: dict[str, np.ndarray]) -> float:
+    """The working region's depth in mm the run was made with (0: a uniform grid)."""
+    return float(d["depth_mm"]) if "depth_mm" in d else REGION_DEPTH_MM
+
+
+def _standard_depth(d: dict[str, np.ndarray]) -> bool:
+    """Whether a fixed-electrode run has the scene's region depth (or no region): the ladders'
+    runs."""
+    return _region_mm(d) in (0.0, REGION_DEPTH_MM)
 
 
 def leaves_fine_region(d: dict[str, np.ndarray]) -> float:
@@ -317,6 +331,44 @@ def _surface_lines(
     return lines
 
 
+def _depth_lines(runs: dict[str, dict[str, np.ndarray]], deeper: list[str]) -> list[str]:
+    """Each run made with a deeper working region (``run --depth-mm``) beside its twin at the
+    scene's depth: the crater at 1.62 / 2.4 / 3 s, and the 0.4 mm runs' ratio against each."""
+    if not deeper:
+        return []
+    lines = [
+        "",
+        f"The reference's region (`run --depth-mm`): a run made with a deeper working region "
+        f"beside the same run at the scene's {REGION_DEPTH_MM:g} mm, so that its crater stays in "
+        f"fine cells; the 0.4 mm rows' crater / this run's.",
+        "",
+        "| run | region mm | nodes | t end s | crater leaves s | cut 1.62 s mm^3 | cut 2.4 s mm^3 "
+        "| cut 3 s mm^3 | depth 3 s mm | 0.4 mm / it at 3 s | 0.4 mm (s0.1) / it at 3 s |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for k in deeper:
+        twin = k.rsplit("_d", 1)[0]
+        for kk in (twin, k):
+            if kk not in runs:
+                continue
+            d = runs[kk]
+            t, cut = d["time_s"], d["cut_m3"]
+            c3 = _at(t, cut, 3.0)
+            ratios = [
+                _fmt(_at(runs[r]["time_s"], runs[r]["cut_m3"], 3.0) / c3, 1.0, 3)
+                if r in runs and c3
+                else "—"
+                for r in ("fixed_0.4mm", "fixed_0.4mm_s0.1")
+            ]
+            lines.append(
+                f"| {kk} | {_region_mm(d):g} | {int(d['n_nodes'])} | {float(t[-1]):.2f} | "
+                f"{_fmt(leaves_fine_region(d))} | {_fmt(_at(t, cut, 1.62), 1e9)} | "
+                f"{_fmt(_at(t, cut, 2.4), 1e9)} | {_fmt(c3, 1e9)} | "
+                f"{_fmt(_at(t, d['depth_m'], 3.0), 1e3)} | {ratios[0]} | {ratios[1]} |"
+            )
+    return lines
+
+
 def _length_mm(d: dict[str, np.ndarray]) -> float:
     """The run's non-local length of the cut driver in mm (0: the local law, older runs)."""
     return float(d["length_mm"]) if "length_mm" in d else 0.0
@@ -451,10 +503,12 @@ def report() -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    runs = {
+    every = {
         p.stem.removeprefix("convergence_"): dict(np.load(p))
         for p in RESULTS.glob("convergence_*.npz")
     }
+    deeper = sorted(k for k, d in every.items() if k.startswith("fixed") and not _standard_depth(d))
+    runs = {k: d for k, d in every.items() if k not in deeper}
     local = [
         k
         for k in runs
@@ -601,6 +655,7 @@ def report() -> None:
         and float(runs[k]["dt_s"]) == DT_S
     ]
     lines += _surface_lines(runs, surfaced, fixed)
+    lines += _depth_lines(every, deeper)
     lines += _cost_lines()
     if moving:
         lines += [

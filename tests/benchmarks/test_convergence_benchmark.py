@@ -196,3 +196,39 @@ def test_surface_cost_steps_both_grids_and_reports_the_ratio(
     assert plain["median_s"] > 0 and "electric" in refined["effects_median_s"]
     text = "\n".join(report._cost_lines())
     assert "Refined / plain: median step" in text and "| 1 |" in text
+
+
+def test_a_deeper_reference_region_sits_beside_its_twin(
+    bench: ModuleType, report: ModuleType
+) -> None:
+    """``run --depth-mm``: its own tag, kept out of the ladders, and shown beside the same run
+    at the scene's depth with the 0.4 mm runs' crater against each."""
+    assert bench.tag_of(0.2, False, surface_mm=0.05, depth_mm=16.0) == "fixed_0.2mm_s0.05_d16"
+    assert bench.tag_of(0.2, False, surface_mm=0.05) == "fixed_0.2mm_s0.05"
+    assert bench.scene_for(0.2, moving=False, depth_mm=16.0).resolution.depth_m == 0.016
+    t = np.arange(1, 101) * 0.03
+
+    def run(scale: float, region_mm: float) -> dict[str, np.ndarray]:
+        return {
+            "time_s": t,
+            "cut_m3": scale * t * 1e-9,
+            "depth_m": 5e-3 * t,  # 5 mm/s: passes 12 mm at 2.4 s, never 16 mm
+            "depth_mm": np.array(region_mm),
+            "n_nodes": np.array(1000),
+        }
+
+    runs = {
+        "fixed_0.4mm": run(0.8, 12.0),
+        "fixed_0.2mm_s0.05": run(1.0, 12.0),
+        "fixed_0.2mm_s0.05_d16": run(1.25, 16.0),
+    }
+    assert not report._standard_depth(runs["fixed_0.2mm_s0.05_d16"])
+    text = "\n".join(report._depth_lines(runs, ["fixed_0.2mm_s0.05_d16"]))
+    assert (
+        "| fixed_0.2mm_s0.05 | 12 | 1000 | 3.00 | 2.43 | 1.62 | 2.40 | 3.00 | 15.00 | 0.800 | — |"
+        in text
+    )
+    assert (
+        "| fixed_0.2mm_s0.05_d16 | 16 | 1000 | 3.00 | — | 2.02 | 3.00 | 3.75 | 15.00 | 0.640 | — |"
+        in text
+    )
