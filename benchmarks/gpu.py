@@ -8,7 +8,7 @@ Run it on a machine with CUDA (the device tool's, when one is lent): every measu
 the CPU and, where ``torch.cuda.is_available()``, on the GPU, in the same run. Without CUDA it
 measures the CPU alone and says so.
 
-**Inference**, batch 1, per grid (``default``: the default scene's graded grid, 24x32x48 nodes;
+**Inference**, batch 1, per grid (``default``: the default scene's graded grid, 35x32x48 nodes;
 ``NZxNYxNX``: a uniform grid of that many nodes): the paper-style network
 (``DisplacementCNN``, the shipped model's configuration) and the incremental one
 (``IncrementalCNN``, the configuration of benchmarks/results/incremental_network.md). Their cost

@@ -9,8 +9,8 @@ predict (auto: the GPU when there is one); ``--data-only``: generate the trainin
 ``--work`` (a later run with the same runs, steps and seed reads it back) and stop;
 ``--reuse``: read the networks a run with the same settings already trained into ``--work``.
 
-One run, one grid: the `default` scene's graded grid (24x32x48, 1 mm under the electrode), the
-grid of the set-up's main job. Training data: FEM runs (every step solved in full) of variants of
+One run, one grid: the `default` scene's graded grid (35x32x48, 1 mm under the electrode; the
+committed results were made on its earlier 24x32x48), the grid of the set-up's main job. Training data: FEM runs (every step solved in full) of variants of
 the default scene on that same grid (its working region fixed): the electrode off the centre by
 up to 1.5 mm, 25-90 W, a power jump x0.4-2.5 and a 3-step pause at random steps. Every mechanics
 step gives one sample (p_prev, p, u_prev, u, phi). The last two runs validate (model selection);

@@ -8,7 +8,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+from diathermy.scene.builtin import builtin_scene
+
 ROOT = Path(__file__).resolve().parents[2]
+DEFAULT = "x".join(map(str, builtin_scene("default").node_shape))  # the default scene's grid
 
 
 def test_gpu_benchmark_runs_tiny_on_the_cpu(tmp_path: Path) -> None:
@@ -21,7 +24,10 @@ def test_gpu_benchmark_runs_tiny_on_the_cpu(tmp_path: Path) -> None:
     data = json.loads(out.with_suffix(".json").read_text())
     models = {r["model"] for r in data["inference"]}
     assert models == {"direct (paper)", "incremental"}
-    assert {r["grid"] for r in data["inference"]} == {"24x32x48 graded (default)", "9x9x17 uniform"}
+    assert {r["grid"] for r in data["inference"]} == {
+        f"{DEFAULT} graded (default)",
+        "9x9x17 uniform",
+    }
     for r in data["inference"]:
         assert 0 < r["forward_median_s"] <= r["forward_p90_s"]
         assert 0 < r["call_median_s"] <= r["call_p90_s"]
@@ -32,7 +38,7 @@ def test_gpu_benchmark_runs_tiny_on_the_cpu(tmp_path: Path) -> None:
     assert modes["full"]["max_se_error"] == 0.0
     assert 0.0 <= modes["incremental"]["max_se_error"] < 0.01
     text = out.read_text()
-    assert "| 24x32x48 graded (default) | default | - | cpu | incremental | 2 |" in text
+    assert f"| {DEFAULT} graded (default) | default | - | cpu | incremental | 2 |" in text
     assert "no GPU (CUDA not available" in text
 
 

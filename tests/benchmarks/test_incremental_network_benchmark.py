@@ -9,7 +9,10 @@ import math
 import sys
 from pathlib import Path
 
+from diathermy.scene.builtin import builtin_scene
+
 ROOT = Path(__file__).resolve().parents[2]
+DEFAULT = "x".join(map(str, builtin_scene("default").node_shape))  # the default scene's grid
 
 
 def _load_benchmark():  # noqa: ANN202 (a module)
@@ -50,12 +53,12 @@ def test_incremental_network_benchmark_runs_tiny(tmp_path: Path) -> None:
     assert "| default | incremental-unet+patch |" in text and "Training history" in text
     # in the engine: persistence, then 'auto' asking each direct network on the first step
     engine = data["meta"]["engine"]
-    assert [r["model"] for r in engine] == [None, "cnn_24x32x48.pt", "cnn_24x32x48-unet.pt"]
+    assert [r["model"] for r in engine] == [None, f"cnn_{DEFAULT}.pt", f"cnn_{DEFAULT}-unet.pt"]
     assert engine[0]["steps"][0]["predictor"] == "none"
     for run in engine[1:]:
         first = run["steps"][0]
         assert first["predictor"] == "cnn" and first["mode"] == "full" and first["iterations"] > 0
-    assert "| cnn_24x32x48-unet.pt |" in text
+    assert f"| cnn_{DEFAULT}-unet.pt |" in text
     for name in ("incremental.pt", "direct-unet.pt"):
         assert (tmp_path / "w" / name).exists()
     # --reuse: the networks read back with their histories, nothing trained again; another
@@ -75,7 +78,7 @@ def test_incremental_network_benchmark_runs_tiny(tmp_path: Path) -> None:
 
     grid = bench.base_scene().node_grid()
     for sfx in ("", "-unet"):
-        path = tmp_path / "w" / f"cnn_24x32x48{sfx}.pt"
+        path = tmp_path / "w" / f"cnn_{DEFAULT}{sfx}.pt"
         ckpt = load_checkpoint(path, expected_grid=grid.shape)
         assert grid_mismatch(ckpt, grid, path.name) is None
         first = ckpt.metrics["first_mechanics_step"]["default"]

@@ -3,8 +3,8 @@
 The elastic response to a local load is global, while the paper's network sees a limited
 neighbourhood (a 3^5 trunk and branches pooled by 2 and 4). Each level of this body halves every
 axis (ceil, so odd node counts lose no node), so ``levels`` = 4 spans 16 cells per axis at the
-bottom and sees a 24x32x48 block whole; the skips carry the fine detail of the crater wall back
-up. Tensors are (N, C, D, H, W) = (N, C, nz, ny, nx); any D, H, W >= 1 works.
+bottom and sees the default scene's 35x32x48 block whole; the skips carry the fine detail of the
+crater wall back up. Tensors are (N, C, D, H, W) = (N, C, nz, ny, nx); any D, H, W >= 1 works.
 """
 
 from __future__ import annotations
