@@ -137,6 +137,11 @@ def test_viewer_drives_a_cutting_session(live: LiveServer, browser: Browser) -> 
         cut_text = page.evaluate("window.viewer.panel()['cut volume']")
         assert float(cut_text.split()[0]) > 0, cut_text
         assert float(page.evaluate("window.viewer.panel()['crater depth']").split()[0]) > 0
+        # a uniform grid is fine everywhere; a graded one says what left its fine region
+        assert page.evaluate("window.viewer.panel()['fine region']") == "uniform grid"
+        region = page.evaluate("window.viewer.fineRegionText({cut: 0.0021, vapor: 0.0})")
+        assert region == "cut 2.1 mm beyond"
+        assert page.evaluate("window.viewer.fineRegionText({cut: 0, vapor: 0})") == "inside"
         after_img = canvas_pixels(page)
         box = page.locator("#view").bounding_box()
         assert box is not None

@@ -60,6 +60,15 @@ function fmt(v, digits, unit) {
   return v === null || v === undefined ? "-" : `${Number(v).toFixed(digits)} ${unit}`;
 }
 
+// How far the cut and the vapor reach beyond a graded grid's fine working region (the step
+// report's beyond_fine_region_m, m): "inside", or what left it and how far; a uniform grid has none.
+export function fineRegionText(beyond) {
+  if (!beyond || Object.keys(beyond).length === 0) return "uniform grid";
+  const out = Object.entries(beyond).filter(([, v]) => v > 0);
+  if (!out.length) return "inside";
+  return out.map(([k, v]) => `${k} ${(1e3 * v).toFixed(1)} mm beyond`).join(", ");
+}
+
 export function updatePanel(st, stats) {
   const s = st.last.surface;
   if (!s) return;
@@ -73,6 +82,9 @@ export function updatePanel(st, stats) {
   $("p-tmax").textContent = rep ? `${rep.max_temperature_k.toFixed(0)} K (${(rep.max_temperature_k - 273.15).toFixed(0)} °C)` : "-";
   $("p-depth").textContent = rep ? fmt(1e3 * rep.crater_depth_m, 2, "mm") : "-";
   $("p-cut").textContent = rep ? fmt(1e9 * rep.cut_volume_m3, 2, "mm³") : "-";
+  const region = $("p-region");
+  region.textContent = rep ? fineRegionText(rep.beyond_fine_region_m) : "-";
+  region.className = region.textContent.includes("beyond") ? "warn" : "";
   const dropped = st.streams ? st.streams.surface.totalDropped + st.streams.volume.totalDropped : 0;
   $("p-dropped").textContent = String(dropped);
 }

@@ -1,7 +1,13 @@
 // The page: token, sessions, run controls, electrode drag/power/on-off, display, readouts.
 // Everything goes through the documented REST API (api.js) and the session stream (stream.js).
 import { Api } from "./api.js";
-import { applyFrames as paint, drawFps as fps, onMessage as receive, updatePanel as panel } from "./frames.js";
+import {
+  applyFrames as paint,
+  drawFps as fps,
+  fineRegionText,
+  onMessage as receive,
+  updatePanel as panel,
+} from "./frames.js";
 import { View } from "./render.js";
 import { Stream } from "./stream.js";
 
@@ -369,6 +375,7 @@ window.viewer = {
     return e && view.grid ? view.screenOf(e.position_m[0], e.position_m[1]) : null;
   },
   screenOf(x, y) { return view.screenOf(x, y); },
+  fineRegionText,
   drawFps,
   // Re-draws the newest frames n times (decode, geometry, colours, render, GPU sync): the
   // viewer's own frames per second, independent of how fast the server steps.
