@@ -203,3 +203,15 @@ def test_a_uniform_grid_has_no_fine_region_to_leave(tmp_path):
     assert summary.cut_volume_m3 > 0  # it cut, and there is no region to report against
     assert read_run(tmp_path / "u.h5")["reports"][-1]["beyond_fine_region_m"] == {}
     assert summary.left_fine_region == {} and summary.warning() is None
+
+
+def test_an_electrode_moved_off_the_fine_region_is_reported():
+    """A client drags the electrode 3.8 mm past the region's side (x <= 12.17 mm): the crater it
+    digs there lies in coarse cells, and the reports say so from the first cut on."""
+    sim = Simulation(graded_scene())
+    sim.set_electrode("active", position_m=(0.016, 0.005))
+    reports = sim.run(20)
+    cutting = [r for r in reports if r.cut_volume_m3 > 0]
+    assert cutting
+    assert all(r.beyond_fine_region_m["cut"] > 2e-3 for r in cutting)
+    assert all(r.beyond_fine_region_m["cut"] == 0.0 for r in reports if r.cut_volume_m3 == 0)
