@@ -101,7 +101,7 @@ class EffectReport(_Result):
 
 class StepReport(_Result):
     """What one step did: per-effect reports, delivered power W, maxima, the cut's volume m^3,
-    and how far (m) the cut and the vapor reach beyond a graded grid's fine working region."""
+    and how far (m) the cut, the vapor and the lesion reach beyond a graded grid's fine region."""
 
     step: int
     time_s: float

@@ -53,11 +53,13 @@ def test_nodes_on_the_box_face_are_inside():
     assert box_excess_m(grid, np.ones(grid.n_nodes, dtype=bool), box) == 0.0
 
 
-def test_cut_and_vapor_are_measured_apart():
+def test_cut_vapor_and_lesion_are_measured_apart():
     grid = Grid((5, 5, 5), size_m=(0.004, 0.004, 0.004))  # 1 mm cells
     z = grid.points()[:, 2]
     phi = z - 0.0025  # removed below 2.5 mm: the nodes at 0, 1, 2 mm
     vapor = np.where(z >= 0.003, 0.1, 0.0)  # vapor in the top two layers
+    omega = np.where(np.isclose(z, 0.001), 1.0, 0.99)  # the lesion's edge is Omega = 1
     box = ((0.0, 0.0, 0.0015), (0.004, 0.004, 0.004))
-    assert beyond_fine_region(grid, box, phi, vapor) == {"cut": 0.0015, "vapor": 0.0}
-    assert beyond_fine_region(grid, None, phi, vapor) == {}
+    got = beyond_fine_region(grid, box, phi, vapor, omega)
+    assert got == {"cut": 0.0015, "vapor": 0.0, "lesion": 0.0005}
+    assert beyond_fine_region(grid, None, phi, vapor, omega) == {}

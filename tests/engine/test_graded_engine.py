@@ -215,3 +215,17 @@ def test_an_electrode_moved_off_the_fine_region_is_reported():
     assert cutting
     assert all(r.beyond_fine_region_m["cut"] > 2e-3 for r in cutting)
     assert all(r.beyond_fine_region_m["cut"] == 0.0 for r in reports if r.cut_volume_m3 == 0)
+
+
+def test_a_coagulation_lesion_past_the_fine_region_is_reported():
+    """No vapor, no cut: the Arrhenius lesion (Omega >= 1) is what a coagulation scene is for,
+    and it too is reported once it spreads past the 1.5 mm deep region."""
+    sim = Simulation(graded_scene(effects=["electric", "thermal", "thermal_damage"], steps=45))
+    reports = sim.run(45)
+    beyond = [r.beyond_fine_region_m for r in reports]
+    assert all(b["cut"] == 0.0 and b["vapor"] == 0.0 for b in beyond)
+    assert beyond[0]["lesion"] == 0.0 and beyond[-1]["lesion"] > 0.0
+    omega = sim.state["thermal_damage"]
+    z = sim.disc.mesh.points[:, 2]
+    deepest = sim.ctx.top_z - z[omega >= 1.0].min()  # the lesion's deepest node below the top
+    assert beyond[-1]["lesion"] >= deepest - RES.depth_m - 1e-12

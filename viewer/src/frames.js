@@ -60,8 +60,9 @@ function fmt(v, digits, unit) {
   return v === null || v === undefined ? "-" : `${Number(v).toFixed(digits)} ${unit}`;
 }
 
-// How far the cut and the vapor reach beyond a graded grid's fine working region (the step
-// report's beyond_fine_region_m, m): "inside", or what left it and how far; a uniform grid has none.
+// How far the cut, the vapor and the lesion reach beyond a graded grid's fine working region
+// (the step report's beyond_fine_region_m, m): "inside", or what left it and how far; a uniform
+// grid has none.
 export function fineRegionText(beyond) {
   if (!beyond || Object.keys(beyond).length === 0) return "uniform grid";
   const out = Object.entries(beyond).filter(([, v]) => v > 0);

@@ -3,8 +3,8 @@
 A graded grid is fine only over the scene's working region (``resolution``); a crater that digs
 below it, a path moved off it by a client, or vapor spreading past it lands on cells that grow
 geometrically away from it, and the results there carry the coarse grid's error
-(docs/resolution.md). Each step report says how far the cut and the vapor reach beyond the
-region, so that a run cannot leave it unnoticed.
+(docs/resolution.md). Each step report says how far the cut, the vapor and the thermal lesion
+reach beyond the region, so that a run cannot leave it unnoticed.
 """
 
 from __future__ import annotations
@@ -34,14 +34,24 @@ def box_excess_m(grid: Grid, nodal_mask: np.ndarray, box: Box) -> float:
     return float(excess) if excess > tol else 0.0
 
 
+LESION_OMEGA = 1.0
+"""The Arrhenius damage integral at the lesion's edge (1 - e^-1 = 63 % of the cells dead)."""
+
+
 def beyond_fine_region(
-    grid: Grid, box: Box | None, level_set: np.ndarray, vapor_fraction: np.ndarray
+    grid: Grid,
+    box: Box | None,
+    level_set: np.ndarray,
+    vapor_fraction: np.ndarray,
+    thermal_damage: np.ndarray,
 ) -> dict[str, float]:
-    """How far in m the cut (phi < 0) and the vapor (x > 0) reach beyond the working region
-    ``box``; empty on a grid without one (uniform: equally fine everywhere)."""
+    """How far in m the cut (phi < 0), the vapor (x > 0) and the lesion (Omega >= 1) reach
+    beyond the working region ``box``; empty on a grid without one (uniform: equally fine
+    everywhere). Nodal arrays (n_nodes,)."""
     if box is None:
         return {}
     return {
         "cut": box_excess_m(grid, level_set < 0, box),
         "vapor": box_excess_m(grid, vapor_fraction > 0, box),
+        "lesion": box_excess_m(grid, thermal_damage >= LESION_OMEGA, box),
     }

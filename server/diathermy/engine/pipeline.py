@@ -115,6 +115,10 @@ def finish_report(rep: StepReport, state: SimulationState, ctx: EngineContext) -
         rep.cut_volume_m3 = topology.cut_volume_m3
         rep.crater_depth_m = topology.crater_depth_m
     rep.beyond_fine_region_m = beyond_fine_region(
-        ctx.disc.grid, ctx.working_region, state["level_set"], state["vapor_fraction"]
+        ctx.disc.grid,
+        ctx.working_region,
+        state["level_set"],
+        state["vapor_fraction"],
+        state["thermal_damage"],
     )
     rep.energy = state.energy.report()

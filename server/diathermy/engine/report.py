@@ -21,8 +21,8 @@ class EffectReport:
 class StepReport:
     """The report of one step; ``to_dict`` gives the JSON record stored in run files.
 
-    ``beyond_fine_region_m``: how far the cut and the vapor reach beyond a graded grid's working
-    region, in m (0: inside; empty on a uniform grid; ``engine.fine_region``)."""
+    ``beyond_fine_region_m``: how far the cut, the vapor and the lesion reach beyond a graded
+    grid's working region, in m (0: inside; empty on a uniform grid; ``engine.fine_region``)."""
 
     step: int
     time_s: float
