@@ -116,3 +116,18 @@ def test_scenes_and_schema(capsys):
     assert "fixed-electrode" in listing and "moving-electrode" in listing
     assert main(["schema"]) == 0
     assert "electrodes" in json.loads(capsys.readouterr().out)["properties"]
+
+
+def test_simulate_warns_once_when_the_cut_leaves_the_fine_region(tmp_path, capsys):
+    """A graded scene whose crater digs past its 1.5 mm deep fine region: one warning line on
+    stderr naming what left it, when and how far; the summary stays on stdout."""
+    from tests.engine.test_graded_engine import graded_scene
+
+    scene = tmp_path / "g.json"
+    scene.write_text(graded_scene(steps=25).model_dump_json())
+    assert main(["simulate", str(scene), "--out", str(tmp_path / "g.h5"), "--quiet"]) == 0
+    out, err = capsys.readouterr()
+    assert "25 steps" in out
+    (line,) = err.strip().splitlines()
+    assert line.startswith("warning: tiny: the vapor from t = ")  # the vapor leaves first
+    assert "the cut from t = " in line and "mm beyond" in line and "resolution.depth_m" in line
