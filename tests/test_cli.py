@@ -121,10 +121,12 @@ def test_scenes_and_schema(capsys):
 def test_simulate_warns_once_when_the_cut_leaves_the_fine_region(tmp_path, capsys):
     """A graded scene whose crater digs past its 1.5 mm deep fine region: one warning line on
     stderr naming what left it, when and how far; the summary stays on stdout."""
-    from tests.engine.test_graded_engine import graded_scene
+    from diathermy.scene import Resolution
+    from tests.engine.scenes import tiny_scene
 
+    res = Resolution(fine_m=0.5e-3, max_cell_m=2e-3, margin_m=1e-3, depth_m=1.5e-3)
     scene = tmp_path / "g.json"
-    scene.write_text(graded_scene(steps=25).model_dump_json())
+    scene.write_text(tiny_scene(resolution=res, steps=25).model_dump_json())
     assert main(["simulate", str(scene), "--out", str(tmp_path / "g.h5"), "--quiet"]) == 0
     out, err = capsys.readouterr()
     assert "25 steps" in out
