@@ -23,7 +23,7 @@ whole path is the working region, so finer cells cost nodes fast (0.5 mm: 1.3 M 
 MAIN_JOB_RESOLUTION = Resolution(fine_m=1e-3, depth_m=16e-3)
 """The default main job's grid: 1 mm over the contact + 2 mm, 16 mm deep (35x32x48 nodes), so that
 its 3 s crater (13.8 mm deep) and the vapor below it stay in the fine cells. 3 mm deep (24x32x48)
-took 0.65x the time (2026-12-06, 100 steps, 36.5 against 56.9 s) but the crater left the fine
+took 0.64x the time (2026-12-06, 100 steps, 36.5 against 56.9 s) but the crater left the fine
 cells at 1.14 s and ended 10.7 mm deep and 80.1 mm^3 against 13.8 mm and 85.1 mm^3."""
 
 
