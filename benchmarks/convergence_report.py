@@ -107,7 +107,7 @@ def _standard_depth(d: dict[str, np.ndarray]) -> bool:
 def leaves_fine_region(d: dict[str, np.ndarray]) -> float:
     """The first time in s the crater's floor lies below the graded grid's working region
     (``depth_mm``; from then on it digs in coarser cells); NaN: it never did, or no region."""
-    region_m = float(d["depth_mm"]) * 1e-3 if "depth_mm" in d else 0.0
+    region_m = _region_mm(d) * 1e-3
     if region_m <= 0:
         return math.nan
     return _first(d["time_s"], d["depth_m"] > region_m)

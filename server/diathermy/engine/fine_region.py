@@ -12,9 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from diathermy.mesh import Grid
-
-Box = tuple[tuple[float, float, float], tuple[float, float, float]]
-"""An axis-aligned box ((x, y, z) low, (x, y, z) high) in m."""
+from diathermy.scene.resolution import Box
 
 
 def box_excess_m(grid: Grid, nodal_mask: np.ndarray, box: Box) -> float:

@@ -19,6 +19,7 @@ from diathermy.physics.levelset_law import (
 from diathermy.physics.materials import Tissue
 from diathermy.scene.resolution import (
     MAX_GRADED_NODES,
+    Box,
     Resolution,
     graded_grid,
     working_region,
@@ -344,9 +345,7 @@ class Scene(_Model):
             return Grid(self.grid, size_m=self.block_m)
         return graded_grid(self.resolution, self.block_m, self.electrodes)
 
-    def working_region(
-        self,
-    ) -> tuple[tuple[float, float, float], tuple[float, float, float]] | None:
+    def working_region(self) -> Box | None:
         """The box ((x, y, z) low, high) in m where ``node_grid()`` is fine; None on a uniform
         grid (equally fine everywhere)."""
         if self.resolution is None:

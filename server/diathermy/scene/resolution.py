@@ -110,12 +110,16 @@ def contact_footprint(electrode: _Electrode) -> tuple[np.ndarray, np.ndarray]:
     return pts.min(axis=0) - pad, pts.max(axis=0) + pad
 
 
+Box = tuple[tuple[float, float, float], tuple[float, float, float]]
+"""An axis-aligned box ((x, y, z) low, (x, y, z) high) in m."""
+
+
 def working_region(
     resolution: Resolution,
     block_m: Sequence[float],
     electrodes: Sequence[_Electrode],
     origin_m: Sequence[float] = (0.0, 0.0, 0.0),
-) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+) -> Box:
     """The working box ((x, y, z) low, (x, y, z) high) in m, clipped to the block."""
     o, size = np.asarray(origin_m, dtype=float), np.asarray(block_m, dtype=float)
     if resolution.region_m is not None:
