@@ -118,6 +118,21 @@ def test_scenes_and_schema(capsys):
     assert "electrodes" in json.loads(capsys.readouterr().out)["properties"]
 
 
+def test_simulate_warns_when_a_left_out_effect_would_act(tmp_path, capsys):
+    """Electric and thermal only at 30 W: the tissue passes boiling by step ~5, so the scene's
+    missing vaporization is named on stderr, once, with when and why."""
+    from tests.engine.scenes import tiny_scene
+
+    scene = tmp_path / "c.json"
+    scene.write_text(tiny_scene(effects=["electric", "thermal"], steps=10).model_dump_json())
+    assert main(["simulate", str(scene), "--out", str(tmp_path / "c.h5"), "--quiet"]) == 0
+    out, err = capsys.readouterr()
+    assert "10 steps" in out
+    (line,) = err.strip().splitlines()
+    assert line.startswith("warning: tiny: the scene leaves out vaporization, which would act")
+    assert "passes boiling (373.15 K)" in line and "add it to effects" in line
+
+
 def test_simulate_warns_once_when_the_cut_leaves_the_fine_region(tmp_path, capsys):
     """A graded scene whose crater digs past its 1.5 mm deep fine region: one warning line on
     stderr naming what left it, when and how far; the summary stays on stdout."""

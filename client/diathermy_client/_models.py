@@ -101,7 +101,8 @@ class EffectReport(_Result):
 
 class StepReport(_Result):
     """What one step did: per-effect reports, delivered power W, maxima, the cut's volume m^3,
-    and how far (m) the cut, the vapor and the lesion reach beyond a graded grid's fine region."""
+    how far (m) the cut, the vapor and the lesion reach beyond a graded grid's fine region, and
+    the effects the scene leaves out that would have acted (name -> why)."""
 
     step: int
     time_s: float
@@ -115,6 +116,7 @@ class StepReport(_Result):
     cut_volume_m3: float | None = 0.0
     crater_depth_m: float | None = 0.0
     beyond_fine_region_m: dict[str, float] = {}
+    left_out_effects: dict[str, str] = {}
     energy: dict[str, float | None] = {}
 
 

@@ -57,7 +57,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         progress=not args.quiet,
     )
     print(summary)
-    if (warning := summary.warning()) is not None:
+    for warning in summary.warnings():
         print(warning, file=sys.stderr)
     return 0
 

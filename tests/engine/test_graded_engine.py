@@ -195,14 +195,15 @@ def test_reports_say_when_the_cut_leaves_the_fine_region(tmp_path):
             assert floor - b < RES.max_cell_m  # ...and the floor above the next node down
     first = next(r["time_s"] for r, b in zip(reports, beyond, strict=True) if b > 0)
     assert summary.left_fine_region["cut"] == (first, max(beyond))
-    assert "cut from t = " in summary.warning() and "resolution.depth_m" in summary.warning()
+    (line,) = summary.warnings()
+    assert "cut from t = " in line and "resolution.depth_m" in line
 
 
 def test_a_uniform_grid_has_no_fine_region_to_leave(tmp_path):
     summary = run_scene(tiny_scene(steps=20), out=tmp_path / "u.h5", progress=False)
     assert summary.cut_volume_m3 > 0  # it cut, and there is no region to report against
     assert read_run(tmp_path / "u.h5")["reports"][-1]["beyond_fine_region_m"] == {}
-    assert summary.left_fine_region == {} and summary.warning() is None
+    assert summary.left_fine_region == {} and summary.warnings() == []
 
 
 def test_an_electrode_moved_off_the_fine_region_is_reported():

@@ -142,6 +142,10 @@ def test_viewer_drives_a_cutting_session(live: LiveServer, browser: Browser) -> 
         region = page.evaluate("window.viewer.fineRegionText({cut: 0.0021, vapor: 0.0})")
         assert region == "cut 2.1 mm beyond"
         assert page.evaluate("window.viewer.fineRegionText({cut: 0, vapor: 0})") == "inside"
+        # every effect is on: nothing left out would act
+        assert page.evaluate("window.viewer.panel()['left out']") == "none"
+        left = page.evaluate("window.viewer.leftOutText({vaporization: 'T up to 400 K'})")
+        assert left == "vaporization would act"
         after_img = canvas_pixels(page)
         box = page.locator("#view").bounding_box()
         assert box is not None

@@ -70,6 +70,13 @@ export function fineRegionText(beyond) {
   return out.map(([k, v]) => `${k} ${(1e3 * v).toFixed(1)} mm beyond`).join(", ");
 }
 
+// The effects the scene leaves out that would have acted this step (the step report's
+// left_out_effects, name -> why): "none", or their names; the reasons go in the tooltip.
+export function leftOutText(leftOut) {
+  const names = Object.keys(leftOut || {});
+  return names.length ? `${names.join(", ")} would act` : "none";
+}
+
 export function updatePanel(st, stats) {
   const s = st.last.surface;
   if (!s) return;
@@ -86,6 +93,10 @@ export function updatePanel(st, stats) {
   const region = $("p-region");
   region.textContent = rep ? fineRegionText(rep.beyond_fine_region_m) : "-";
   region.className = region.textContent.includes("beyond") ? "warn" : "";
+  const leftOut = $("p-left-out");
+  leftOut.textContent = rep ? leftOutText(rep.left_out_effects) : "-";
+  leftOut.title = rep ? Object.values(rep.left_out_effects || {}).join("; ") : "";
+  leftOut.className = leftOut.textContent.endsWith("would act") ? "warn" : "";
   const dropped = st.streams ? st.streams.surface.totalDropped + st.streams.volume.totalDropped : 0;
   $("p-dropped").textContent = String(dropped);
 }

@@ -5,6 +5,7 @@ import {
   applyFrames as paint,
   drawFps as fps,
   fineRegionText,
+  leftOutText,
   onMessage as receive,
   updatePanel as panel,
 } from "./frames.js";
@@ -376,6 +377,7 @@ window.viewer = {
   },
   screenOf(x, y) { return view.screenOf(x, y); },
   fineRegionText,
+  leftOutText,
   drawFps,
   // Re-draws the newest frames n times (decode, geometry, colours, render, GPU sync): the
   // viewer's own frames per second, independent of how fast the server steps.

@@ -22,6 +22,7 @@ from diathermy.engine.context import EngineContext
 from diathermy.engine.effects import EFFECTS
 from diathermy.engine.electrodes import electrode_pose
 from diathermy.engine.fine_region import beyond_fine_region
+from diathermy.engine.left_out import left_out_acting
 from diathermy.engine.report import StepReport
 from diathermy.engine.state import SimulationState
 from diathermy.engine.step import Outcome, Step
@@ -120,5 +121,13 @@ def finish_report(rep: StepReport, state: SimulationState, ctx: EngineContext) -
         state["level_set"],
         state["vapor_fraction"],
         state["thermal_damage"],
+    )
+    rep.left_out_effects = left_out_acting(
+        ctx.effects,
+        ctx.tissue,
+        max_temperature_k=rep.max_temperature_k,
+        max_pressure_pa=rep.max_pressure_pa,
+        max_strain_energy_j_per_m3=rep.max_strain_energy_j_per_m3,
+        delivered_power_w=rep.delivered_power_w,
     )
     rep.energy = state.energy.report()

@@ -22,7 +22,9 @@ class StepReport:
     """The report of one step; ``to_dict`` gives the JSON record stored in run files.
 
     ``beyond_fine_region_m``: how far the cut, the vapor and the lesion reach beyond a graded
-    grid's working region, in m (0: inside; empty on a uniform grid; ``engine.fine_region``)."""
+    grid's working region, in m (0: inside; empty on a uniform grid; ``engine.fine_region``).
+    ``left_out_effects``: the effects the scene leaves out that this step's state says would act,
+    each with why (``engine.left_out``; empty when the scene's effects suffice)."""
 
     step: int
     time_s: float
@@ -36,6 +38,7 @@ class StepReport:
     cut_volume_m3: float = 0.0
     crater_depth_m: float = 0.0
     beyond_fine_region_m: dict[str, float] = field(default_factory=dict)
+    left_out_effects: dict[str, str] = field(default_factory=dict)
     energy: dict[str, float] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:

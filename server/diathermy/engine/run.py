@@ -30,6 +30,9 @@ class RunSummary:
     left_fine_region: dict[str, tuple[float, float]] = field(default_factory=dict)
     """What reached beyond the graded grid's working region: name -> (the first time it did,
     in s; the farthest it reached beyond, in m)."""
+    left_out: dict[str, tuple[float, str]] = field(default_factory=dict)
+    """Effects the scene leaves out that would have acted: name -> (the first time, in s; why,
+    at the last step that said so)."""
 
     def __str__(self) -> str:
         return (
@@ -39,18 +42,25 @@ class RunSummary:
             f"-> {self.out}"
         )
 
-    def warning(self) -> str | None:
-        """One line on what left the fine working region, None when nothing did."""
-        if not self.left_fine_region:
-            return None
-        parts = ", ".join(
-            f"the {name} from t = {t:.2f} s (up to {far * 1e3:.2f} mm beyond)"
-            for name, (t, far) in self.left_fine_region.items()
-        )
-        return (
-            f"warning: {self.scene}: {parts} left the grid's fine working region, so results "
-            "there are on coarser cells; deepen resolution.depth_m or widen resolution.region_m"
-        )
+    def warnings(self) -> list[str]:
+        """One line on what left the fine working region and one per left-out effect that
+        would have acted; empty when neither happened."""
+        lines = []
+        if self.left_fine_region:
+            parts = ", ".join(
+                f"the {name} from t = {t:.2f} s (up to {far * 1e3:.2f} mm beyond)"
+                for name, (t, far) in self.left_fine_region.items()
+            )
+            lines.append(
+                f"warning: {self.scene}: {parts} left the grid's fine working region, so results "
+                "there are on coarser cells; deepen resolution.depth_m or widen resolution.region_m"
+            )
+        for name, (t, why) in self.left_out.items():
+            lines.append(
+                f"warning: {self.scene}: the scene leaves out {name}, which would act from "
+                f"t = {t:.2f} s: {why}; add it to effects, or drive the electrode less hard"
+            )
+        return lines
 
 
 def track_fine_region(
@@ -61,6 +71,14 @@ def track_fine_region(
         if far > 0:
             first, farthest = left.get(name, (time_s, 0.0))
             left[name] = (first, max(farthest, far))
+
+
+def track_left_out(
+    left_out: dict[str, tuple[float, str]], time_s: float, acting: dict[str, str]
+) -> None:
+    """Fold one step's ``StepReport.left_out_effects`` into ``left_out`` (see ``RunSummary``)."""
+    for name, why in acting.items():
+        left_out[name] = (left_out.get(name, (time_s, why))[0], why)
 
 
 def run_scene(
@@ -80,6 +98,7 @@ def run_scene(
     wall = 0.0
     tmax = pmax = 0.0
     left: dict[str, tuple[float, float]] = {}
+    left_out: dict[str, tuple[float, str]] = {}
     with RunWriter(out, sim.grid, scene.model_dump_json()) as writer:
         bar = tqdm(total=scene.steps, disable=not progress, unit="step", desc=scene.name)
         for _ in range(scene.steps):
@@ -88,6 +107,7 @@ def run_scene(
             tmax = max(tmax, report.max_temperature_k)
             pmax = max(pmax, report.max_pressure_pa)
             track_fine_region(left, report.time_s, report.beyond_fine_region_m)
+            track_left_out(left_out, report.time_s, report.left_out_effects)
             if sim.step_index % every == 0 or sim.step_index == scene.steps:
                 writer.append(
                     time_s=sim.time_s,
@@ -124,4 +144,5 @@ def run_scene(
         cut_volume_m3=last.cut_volume_m3 if last else 0.0,
         crater_depth_m=last.crater_depth_m if last else 0.0,
         left_fine_region=left,
+        left_out=left_out,
     )
