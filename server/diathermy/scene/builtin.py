@@ -74,12 +74,21 @@ def _moving_slow() -> Scene:
     )
 
 
+COAGULATION_POWER_W = 0.5
+"""The coagulation scene's power, W. The scene leaves vaporization out, so it holds only below
+boiling: 0.5 W keeps its hottest node at 357 K after 6 s on its 0.4 mm grid (0.6 W: 366 K; the
+20 W it had until 2026-12-07 passed boiling at 0.08 s and reached 2200 K). The step reports'
+``left_out_effects`` say when a scene passes that line."""
+
+
 def _coagulation() -> Scene:
     return Scene(
         name="coagulation",
-        description="Electric and thermal only (no vaporization, no mechanics): a 20 W "
-        "electrode coagulating for 6 s, with the Arrhenius burn map.",
-        electrodes=[Electrode(power_w=20.0)],
+        description="Electric and thermal only (no vaporization, no mechanics): a 0.5 W "
+        "electrode coagulating for 6 s, with the Arrhenius burn map (a lesion ~0.8 mm deep). "
+        "Without vaporization the scene holds only below boiling: 0.5 W keeps the hottest node "
+        "at 357 K, where 20 W passed boiling in 0.08 s and reached 2200 K.",
+        electrodes=[Electrode(power_w=COAGULATION_POWER_W)],
         resolution=FIXED_RESOLUTION,
         effects=["electric", "thermal", "thermal_damage"],
         steps=200,
