@@ -47,6 +47,7 @@ QUICK_CUT = {
     "electrodes": [{"position_m": [0.01, 0.005], "power_w": 200.0}],
 }
 FIELDS = ["temperature", "displacement"]
+DTYPE = "float32"  # the stream clients' subscription (--dtype); forked clients inherit it
 CLIENTS_PER_PROC = 4
 FULL_DECODE = False  # service_trace.py --full-decode: the old client
 STEADY = {"name": "default-electrothermal", "effects": ["electric", "thermal"]}
@@ -244,7 +245,7 @@ async def stream_client(
     ws = await open_client(url)
     try:
         await ws.recv(30.0)  # hello
-        ws.send_text(json.dumps({"type": "subscribe", "fields": FIELDS}))
+        ws.send_text(json.dumps({"type": "subscribe", "fields": FIELDS, "dtype": DTYPE}))
         if rate_hz is not None:
             ws.send_text(json.dumps({"type": "run", "rate_hz": rate_hz}))
         frames: list[tuple[float, int, int]] = []  # (receive time, control_id, step) of each
@@ -619,7 +620,7 @@ def write_report(
         "# Service benchmark",
         "",
         f"`python benchmarks/service.py {meta['argv']}` — the real engine, fields "
-        f"{', '.join(FIELDS)} (float32 volume), loopback, {meta['seconds']} s per row, "
+        f"{', '.join(FIELDS)} ({DTYPE} volume), loopback, {meta['seconds']} s per row, "
         f"{os.cpu_count()} cores shared by the server, the clients and other jobs (load average "
         f"{meta['load']}).",
         "",
@@ -659,7 +660,7 @@ def write_report(
         f"{DEFAULT_LABEL.split(' ')[0]}): a steady cost per step, so that rows compare "
         "like with like (with vaporization and mechanics a step costs ~100x more once the "
         "tissue boils, which happens within a row). Frames carry temperature and displacement "
-        "(float32 volume).",
+        f"({DTYPE} volume).",
         "",
     ]
     for grid, alone, fan in tables:
@@ -789,6 +790,12 @@ def main() -> None:
     p.add_argument("--seconds", default="3,6", help="seconds per row, per grid (comma-separated)")
     p.add_argument("--reps", type=int, default=3, help="interleaved repetitions per grid")
     p.add_argument("--clients", default="1,4,16")
+    p.add_argument(
+        "--dtype",
+        choices=["float32", "float16"],
+        default="float32",
+        help="the stream clients' subscription dtype (float16: 0.51x the bytes)",
+    )
     p.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "service.md"))
     p.add_argument(
         "--engine-cpus",
@@ -801,6 +808,8 @@ def main() -> None:
     if args.cmd == "serve-child":
         serve_child(args)
         return
+    global DTYPE
+    DTYPE = args.dtype
     import tempfile
 
     slow_grid = [int(x) for x in args.slow_grid.split("x")]
