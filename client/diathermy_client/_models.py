@@ -152,7 +152,8 @@ class ElectrodeAck(_Result):
 
 
 class Electrode(_Result):
-    """An electrode at the session's current time: position (x, y) m, drive, on/off."""
+    """An electrode at the session's current time: position (x, y) m, drive, the generator's
+    voltage limit (V rms, None: none), on/off."""
 
     name: str
     position_m: tuple[float, float]
@@ -160,6 +161,7 @@ class Electrode(_Result):
     drive: Literal["power", "current_density"]
     power_w: float
     current_density_a_per_m2: float
+    max_voltage_v: float | None = None
     active: bool
     follows_path: bool
     control_id: int

@@ -260,3 +260,40 @@ def test_nonlocal_cut_driver_runs_through_the_engine():
     cut = averaged.run(30)[-1].cut_volume_m3
     assert cut > 0 and abs(cut / local - 1) > 0.01
     assert averaged.scene.level_set.law(7e4).nonlocal_length_m == 5e-4
+
+
+def test_a_generator_voltage_limit_holds_the_electrode_and_lowers_the_power():
+    """30 W needs some voltage V30 on the tiny block; a limit of half that holds every step at
+    it (delivered P = V_max I, a quarter of the set power at first) and says so; a limit above
+    what the run ever needs leaves it bit for bit as without one, cut included."""
+    free = Simulation(tiny_scene(steps=20))
+    free_reports = free.run(20)
+    volts = [r.effects["electric"].extra["voltage_v"] for r in free_reports]
+    assert all(not r.effects["electric"].extra["voltage_limited"] for r in free_reports)
+    v_max = 0.5 * volts[0]
+    held = Simulation(tiny_scene(electrodes=[Electrode(position_m=(0.01, 0.005), power_w=30.0,
+                                                       max_voltage_v=v_max)]))  # fmt: skip
+    reports = held.run(8)
+    assert reports[0].delivered_power_w == pytest.approx(0.25 * 30.0, rel=1e-9)
+    for r in reports:
+        extra = r.effects["electric"].extra
+        assert extra["voltage_limited"] and extra["voltage_v"] == pytest.approx(v_max, rel=1e-9)
+        assert r.delivered_power_w == pytest.approx(v_max * extra["current_a"], rel=1e-9)
+    loose = Simulation(tiny_scene(steps=20, electrodes=[
+        Electrode(position_m=(0.01, 0.005), power_w=30.0, max_voltage_v=1.01 * max(volts))
+    ]))  # fmt: skip
+    loose.run(20)
+    assert free_reports[-1].cut_volume_m3 > 0
+    for name in ("temperature", "level_set", "displacement"):
+        assert np.array_equal(loose.state[name], free.state[name]), name
+
+
+@pytest.mark.parametrize("v", [0, -1, "nan", None])
+def test_scene_voltage_limit_is_validated(v):
+    from pydantic import ValidationError
+
+    if v is None:
+        assert Electrode(max_voltage_v=None).max_voltage_v is None
+        return
+    with pytest.raises(ValidationError, match="max_voltage_v"):
+        Electrode(max_voltage_v=float(v))

@@ -11,7 +11,7 @@ from diathermy.fem.geometry import structured_geometry
 from diathermy.fem.scalar import surface_load, volume_load
 from diathermy.mesh import Grid, TetMesh, build_tet_mesh
 from diathermy.physics.contact_load import contact_weights, disk_quadrature
-from diathermy.physics.driven_potential import DrivenPotential, ElectrodeDrive
+from diathermy.physics.driven_potential import DrivenPotential, ElectrodeDrive, voltage_limited
 from diathermy.physics.electric import (
     WINDOW_MAX_NODES,
     PotentialSolver,
@@ -137,6 +137,43 @@ def test_constant_power_hits_its_target(paper_meshes):
         assert sol.power_w == pytest.approx(target, rel=1e-12)
         assert np.dot(q, geom.volumes) == pytest.approx(target, rel=1e-6)
     assert solver.krylov.n_solves == 1  # one unit-current solve serves both targets
+
+
+def test_a_voltage_limit_caps_the_drive_at_v_squared_over_r(paper_meshes):
+    """A generator held at V_max delivers V_max^2 / R whatever it was set to, in the Joule heat
+    too; a limit above the voltage the drive needs changes nothing, bit for bit."""
+    mesh = paper_meshes[(17, 17, 33)]
+    geom, solver = setup(mesh)
+    driven = DrivenPotential(solver)
+    contact = contact_weights(mesh, PAPER_CENTER, A_M)
+    free = driven.solve(SIGMA, contact, ElectrodeDrive(mode="power", power_w=50.0))
+    R = free.resistance_ohm
+    volts = free.current_a * R  # what 50 W needs
+    assert volts == pytest.approx(np.sqrt(50.0 * R), rel=1e-12)
+    for mode in ("power", "current_density"):
+        nominal = driven.solve(SIGMA, contact, ElectrodeDrive(mode=mode, power_w=50.0))
+        need = nominal.current_a * R
+        above = driven.solve(
+            SIGMA, contact, ElectrodeDrive(mode=mode, power_w=50.0, max_voltage_v=1.01 * need)
+        )
+        assert np.array_equal(above.V, nominal.V) and above.power_w == nominal.power_w
+        loose = ElectrodeDrive(mode=mode, power_w=50.0, max_voltage_v=1.01 * need)
+        assert not voltage_limited(loose, above.current_a, R)
+        v_max = 0.5 * need
+        drive = ElectrodeDrive(mode=mode, power_w=50.0, max_voltage_v=v_max)
+        held = driven.solve(SIGMA, contact, drive)
+        assert held.power_w == pytest.approx(v_max**2 / R, rel=1e-12)
+        assert held.power_w == pytest.approx(0.25 * nominal.power_w, rel=1e-12)
+        q = joule_heat(mesh.grid, np.full(mesh.n_tets, SIGMA), held.V)
+        assert np.dot(q, geom.volumes) == pytest.approx(held.power_w, rel=1e-6)
+        assert voltage_limited(drive, held.current_a, R)
+    assert solver.krylov.n_solves == 1  # every drive and limit from the one unit field
+
+
+@pytest.mark.parametrize("v", [0.0, -5.0, float("nan"), float("inf")])
+def test_a_voltage_limit_must_be_positive_volts(v):
+    with pytest.raises(SceneError, match="max_voltage_v"):
+        ElectrodeDrive(max_voltage_v=v)
 
 
 def test_potential_resolved_only_when_sigma_or_contact_change(paper_meshes):

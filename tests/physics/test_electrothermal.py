@@ -32,7 +32,14 @@ def scene(mesh, rng):
 
 
 @pytest.mark.parametrize(
-    "drive", [ElectrodeDrive(), ElectrodeDrive(mode="power", power_w=50.0)], ids=["j0", "50W"]
+    "drive",
+    [
+        ElectrodeDrive(),
+        ElectrodeDrive(mode="power", power_w=50.0),
+        ElectrodeDrive(max_voltage_v=30.0),  # the limits hold: j0 needs ~48 V here, 50 W ~99 V
+        ElectrodeDrive(mode="power", power_w=50.0, max_voltage_v=60.0),
+    ],
+    ids=["j0", "50W", "j0-40V", "50W-60V"],
 )
 @pytest.mark.parametrize("thermal_block", ["amg", "jacobi", "auto"])
 def test_monolithic_equals_staggered(mesh_geom, rng, drive, thermal_block):
@@ -60,7 +67,9 @@ def test_monolithic_equals_staggered(mesh_geom, rng, drive, thermal_block):
         assert m.current_a == pytest.approx(s.current_a, rel=1e-8)
         T_s, T_m = s.T, m.T
     assert s.heat.fallback_nodes.size > 0
-    if drive.mode == "power":
+    if drive.max_voltage_v is not None:  # held at the limit: P = V^2 / R = V I
+        assert s.power_w == pytest.approx(drive.max_voltage_v * s.current_a, rel=1e-9)
+    elif drive.mode == "power":
         assert s.power_w == pytest.approx(50.0, rel=1e-12)
 
 

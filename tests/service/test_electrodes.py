@@ -32,6 +32,7 @@ def test_electrode_reads_back_scene_and_controls(live: LiveServer, api: httpx.Cl
             "drive": "power",
             "power_w": 50.0,
             "current_density_a_per_m2": 57200.0,
+            "max_voltage_v": None,
             "active": True,
             "follows_path": False,
             "control_id": 0,

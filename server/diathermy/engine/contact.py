@@ -166,15 +166,20 @@ def contact_key(
 def combined(
     contacts: list[tuple[ElectrodePose, ContactWeights]],
 ) -> tuple[ContactWeights, ElectrodeDrive]:
-    """Several active electrodes act as one generator output of equal current density."""
+    """Several active electrodes act as one generator output of equal current density (the
+    lowest voltage limit among them holds for the output)."""
+    limits = [p.max_voltage_v for p, _ in contacts if p.max_voltage_v is not None]
+    v_max = min(limits) if limits else None  # one output: the lowest limit holds
     if len(contacts) == 1:
         pose, c = contacts[0]
-        return c, ElectrodeDrive(pose.drive, pose.current_density_a_per_m2, pose.power_w)  # type: ignore[arg-type]
+        mode = pose.drive
+        return c, ElectrodeDrive(mode, pose.current_density_a_per_m2, pose.power_w, v_max)  # type: ignore[arg-type]
     weights = sum(c.weights for _, c in contacts)
     area = sum(c.area_m2 for _, c in contacts)
     if all(p.drive == "power" for p, _ in contacts):
-        drive = ElectrodeDrive("power", power_w=sum(p.power_w for p, _ in contacts))
+        total = sum(p.power_w for p, _ in contacts)
+        drive = ElectrodeDrive("power", power_w=total, max_voltage_v=v_max)
     else:
         j = sum(p.current_density_a_per_m2 * c.area_m2 for p, c in contacts) / area
-        drive = ElectrodeDrive("current_density", current_density_a_per_m2=j)
+        drive = ElectrodeDrive("current_density", current_density_a_per_m2=j, max_voltage_v=v_max)
     return ContactWeights(weights=np.asarray(weights), area_m2=float(area)), drive

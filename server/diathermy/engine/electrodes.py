@@ -69,6 +69,7 @@ class ElectrodePose:
     current_density_a_per_m2: float
     active: bool
     contact: str = "flat"
+    max_voltage_v: float | None = None
 
 
 def electrode_pose(
@@ -100,6 +101,7 @@ def electrode_pose(
             else o.current_density_a_per_m2
         ),
         active=bool(on),
+        max_voltage_v=el.max_voltage_v,
     )
 
 

@@ -27,23 +27,31 @@ class ElectrodeDrive:
     mode: Literal["current_density", "power"] = "current_density"
     current_density_a_per_m2: float = 5.72e4
     power_w: float = 50.0
+    max_voltage_v: float | None = None
+    """The generator's output limit in V (rms): where the set drive would need more, the
+    electrode is held at this voltage and delivers V^2 / R (None: no limit)."""
 
     def __post_init__(self) -> None:
         if self.mode not in ("current_density", "power"):
             raise SceneError(f"electrode drive mode must be current_density or power: {self.mode}")
         if not self.current_density_a_per_m2 >= 0 or not self.power_w >= 0:
             raise SceneError("electrode current density and power must be non-negative")
+        v = self.max_voltage_v
+        if v is not None and not (np.isfinite(v) and v > 0):
+            raise SceneError(f"electrode max_voltage_v must be a positive number of volts, got {v}")
 
 
 @dataclass(frozen=True)
 class PotentialSolution:
-    """The driven potential: V (n_nodes,) in V, nodal current load (n_nodes,) in A, I, P."""
+    """The driven potential: V (n_nodes,) in V, nodal current load (n_nodes,) in A, I, P, and
+    the resistance R in ohm between the electrodes (the electrode's voltage is I R)."""
 
     V: np.ndarray
     load: np.ndarray
     current_a: float
     power_w: float
     stats: PotentialStats
+    resistance_ohm: float = 0.0
 
 
 class DrivenPotential:
@@ -119,16 +127,28 @@ class DrivenPotential:
             current_a=current,
             power_w=current**2 * R,
             stats=stats,
+            resistance_ohm=R,
         )
 
 
 def drive_current(drive: ElectrodeDrive, area_m2: float, resistance_ohm: float) -> float:
-    """Injected current I in A: j * area (constant current density) or sqrt(P / R) (power)."""
+    """Injected current I in A: j * area (constant current density) or sqrt(P / R) (power),
+    at most V_max / R where the generator's voltage limit ``max_voltage_v`` is set."""
     if drive.mode == "current_density":
-        return drive.current_density_a_per_m2 * area_m2
-    if not resistance_ohm > 0:
-        raise SolverDivergedError(
-            f"potential: resistance between the electrodes is {resistance_ohm} ohm, so no current "
-            "delivers the set power (does the contact touch the return electrode?)"
-        )
-    return float(np.sqrt(drive.power_w / resistance_ohm))
+        current = drive.current_density_a_per_m2 * area_m2
+    else:
+        if not resistance_ohm > 0:
+            raise SolverDivergedError(
+                f"potential: resistance between the electrodes is {resistance_ohm} ohm, so no "
+                "current delivers the set power (does the contact touch the return electrode?)"
+            )
+        current = float(np.sqrt(drive.power_w / resistance_ohm))
+    if drive.max_voltage_v is not None and current * resistance_ohm > drive.max_voltage_v:
+        current = drive.max_voltage_v / resistance_ohm
+    return current
+
+
+def voltage_limited(drive: ElectrodeDrive, current_a: float, resistance_ohm: float) -> bool:
+    """Whether the generator's voltage limit set ``current_a`` (below what the drive asked)."""
+    v = drive.max_voltage_v
+    return v is not None and current_a * resistance_ohm >= v * (1 - 1e-12)

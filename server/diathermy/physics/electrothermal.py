@@ -241,7 +241,7 @@ class ElectroThermal:
         drive: ElectrodeDrive,
     ) -> float:
         """Injected current; constant power takes R = (w . V*) / I* from the linearisation point."""
-        if drive.mode == "current_density":
+        if drive.mode == "current_density" and drive.max_voltage_v is None:
             return drive_current(drive, contact.area_m2, 1.0)
         if I_star <= 0:  # no field to read R from: a 1 A pass, rescaled by the next pass
             return 1.0

@@ -113,6 +113,12 @@ class Electrode(_Model):
     drive: Literal["current_density", "power"] = "power"
     current_density_a_per_m2: NonNegative = 5.72e4
     power_w: NonNegative = 50.0
+    max_voltage_v: Positive | None = Field(
+        None,
+        description="the generator's output limit, V rms: where the set power or current density "
+        "would need more, the electrode is held at this voltage and delivers V^2 / R, so the "
+        "power falls as the tissue's resistance R rises (a generator's power curve); null: none",
+    )
     active: bool = True
     schedule_s: list[tuple[NonNegative, NonNegative]] | None = Field(
         None, description="on-intervals [(t_on, t_off), ...] in s; None means always on"

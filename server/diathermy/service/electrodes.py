@@ -32,6 +32,9 @@ class ElectrodeState(BaseModel):
     current_density_a_per_m2: float = Field(
         description="set current density, A/m^2 (used when drive is 'current_density')"
     )
+    max_voltage_v: float | None = Field(
+        description="the generator's voltage limit, V rms (from the scene; null: none)"
+    )
     active: bool = Field(description="switched on now (the schedule and run-time switch applied)")
     follows_path: bool = Field(
         description="the position comes from the scene's path (it moves with time) rather than "
@@ -60,6 +63,7 @@ def electrode_states(sim: Any, control_id: int) -> list[ElectrodeState]:
                 drive="current_density" if pose.drive == "current_density" else "power",
                 power_w=pose.power_w,
                 current_density_a_per_m2=pose.current_density_a_per_m2,
+                max_voltage_v=pose.max_voltage_v,
                 active=pose.active,
                 follows_path=el.path is not None
                 and (override is None or override.position_m is None),

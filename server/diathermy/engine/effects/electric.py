@@ -18,6 +18,7 @@ from diathermy.engine.state import ContactKey, SimulationState
 from diathermy.engine.step import MonolithicRequest, Outcome, Step
 from diathermy.mesh.kuhn_fields import tet_mean
 from diathermy.physics.contact_load import ContactWeights
+from diathermy.physics.driven_potential import voltage_limited
 from diathermy.physics.electric import joule_heat
 from diathermy.physics.tissue_effects import electrical_conductivity
 
@@ -92,6 +93,11 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
     q1 = ctx.potential.per_unit("joule_heat", lambda V1: joule_heat(ctx.disc.grid, sigma, V1))
     fields = {"potential": sol.V, "joule_heat": i2 * q1}
     handoff: dict[str, Any] = {"delivered_power_w": sol.power_w}
+    # the electrode's voltage, and whether the generator's limit held it there
+    volts = {
+        "voltage_v": sol.current_a * sol.resistance_ohm,
+        "voltage_limited": voltage_limited(drive, sol.current_a, sol.resistance_ohm),
+    }
     if ctx.has("thermal"):
         load1 = ctx.potential.per_unit("joule_load", lambda _: ctx.heat.hmesh.joule_load(q1))
         handoff["joule_load_w"] = i2 * load1
@@ -99,12 +105,13 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
         report = EffectReport(
             False,
             "conductivity and contact unchanged: potential reused (scaled to the drive)",
-            extra={"current_a": sol.current_a},
+            extra={"current_a": sol.current_a, **volts},
         )
     else:
         st = sol.stats
         extra: dict[str, Any] = {
             "current_a": sol.current_a,
+            **volts,
             "residual": st.residual,
             "reassembled": st.reassembled,
             "setup_s": st.setup_s,
