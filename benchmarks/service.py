@@ -517,7 +517,7 @@ async def frame_sizes(server: Server, sid: str) -> list[dict[str, Any]]:
         url, additional_headers={"Authorization": f"Bearer {TOKEN}"}, max_size=None
     ) as ws:
         await ws.recv()
-        for region in ("volume", "surface"):
+        for region in ("volume", "top", "surface"):
             for dtype in ("float32", "float16"):
                 sub = {"type": "subscribe", "fields": FIELDS, "dtype": dtype, "region": region}
                 await ws.send(json.dumps(sub))

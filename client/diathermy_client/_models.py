@@ -11,7 +11,7 @@ from pydantic import BaseModel, ConfigDict
 
 Dtype = Literal["float16", "float32", "float64"]
 WireDtype = Literal["float16", "float32"]
-Region = Literal["volume", "surface"]
+Region = Literal["volume", "top", "surface"]
 
 
 class _Result(BaseModel):

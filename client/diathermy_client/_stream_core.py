@@ -50,7 +50,7 @@ _CODE_ERRORS: dict[str, type[DiathermyError]] = {
 
 @dataclass(frozen=True)
 class Subscription:
-    """What frames carry: field names, every k-th step, float16/float32, volume or cut surface."""
+    """What frames carry: field names, every k-th step, float16/float32, volume, its top layer or the cut surface."""
 
     fields: tuple[str, ...] = ()
     every: int = 1

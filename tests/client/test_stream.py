@@ -53,6 +53,23 @@ def test_sync_stream_with_controls(client: Client) -> None:
     assert st.dropped_locally == 0
 
 
+def test_sync_stream_of_the_top_face(client: Client) -> None:
+    """region='top': the top node layer, (ny, nx[, 3]), equal to the volume frame's last layer."""
+    s = client.create_session("default", grid=SMALL_GRID)
+    s.step(3)
+    fields = ["temperature", "displacement"]
+    with s.stream(fields, region="top", timeout_s=10) as top_stream:
+        top = top_stream.next_frame(5)
+    with s.stream(fields, timeout_s=10) as volume_stream:
+        vol = volume_stream.next_frame(5)
+    assert top.step == vol.step == 3
+    assert top["temperature"].shape == SMALL_GRID[1:]
+    assert top["displacement"].shape == (*SMALL_GRID[1:], 3)
+    for name in fields:
+        assert np.array_equal(top[name], vol[name][-1]), name
+    assert top["temperature"].max() > 310.15  # the electrode heats the top face
+
+
 def test_async_stream_every_kth_and_controls(live: LiveServer) -> None:
     async def main() -> None:
         async with AsyncClient(live.url, TOKEN_A) as client:

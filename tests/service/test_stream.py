@@ -140,6 +140,43 @@ def test_every_kth_and_surface_region(live: LiveServer, api: httpx.Client) -> No
         assert t.shape == (n,) and t.min() > 300.0  # sampled tissue temperatures, in K
 
 
+def test_top_region_is_the_volume_top_layer(live: LiveServer, api: httpx.Client) -> None:
+    """The tissue's top face only: the volume frame's last z layer, the same values in the same
+    dtype, in about 1/nz of the bytes (what a viewer that draws the top face needs)."""
+    sid = api.post("/v1/sessions", json=CUT).json()["id"]
+    step_until_cut(api, sid)
+    got: dict[str, tuple[int, dict]] = {}
+    with open_stream(live, sid) as ws:
+        recv(ws)
+        for region in ("volume", "top"):
+            sub = {"fields": ["temperature", "displacement", "level_set"], "dtype": "float16"}
+            ws.send(json.dumps({"type": "subscribe", "region": region, **sub}))
+            while True:
+                raw = ws.recv(timeout=10)
+                msg = unpack(raw)
+                if msg["type"] == "frame":
+                    break
+            got[region] = (len(raw), msg)
+    (vol_bytes, vol), (top_bytes, top) = got["volume"], got["top"]
+    assert vol["step"] == top["step"]
+    nz = decode_array(vol["fields"]["temperature"]).shape[0]
+    for name in ("temperature", "displacement", "level_set"):
+        whole, face = decode_array(vol["fields"][name]), decode_array(top["fields"][name])
+        assert face.dtype == np.float16 and np.array_equal(face, whole[-1]), name
+    assert decode_array(top["fields"]["level_set"]).min() < 0  # the cut reaches the face
+
+    def data_bytes(msg: dict) -> int:
+        return sum(len(a["data"]) for a in msg["fields"].values())
+
+    assert nz * data_bytes(top) == data_bytes(vol)  # the arrays: exactly 1/nz
+    assert top_bytes < vol_bytes - (1 - 1 / nz) * data_bytes(vol) + 64  # the rest: the header
+    with open_stream(live, sid) as ws:
+        recv(ws)
+        ws.send(json.dumps({"type": "subscribe", "fields": ["joule_heat"], "region": "top"}))
+        err = recv_type(ws, "error")
+        assert err["field"] == "fields.0" and "top region" in err["message"]
+
+
 @pytest.mark.parametrize(
     ("message", "field"),
     [

@@ -24,7 +24,10 @@ export function onMessage(st, stats, setStatus, kind, msg, bytes) {
   }
 }
 
+// The top face's values: a "top" region frame carries (ny, nx[, 3]) already; a volume frame
+// (nz, ny, nx[, 3]) is cut to its last z layer.
 function topLayer(arr, comps) {
+  if (arr.shape.length === (comps === 1 ? 2 : 3)) return arr.values;
   const [nz, ny, nx] = arr.shape;
   const n = ny * nx * comps;
   return arr.values.subarray((nz - 1) * n, nz * n);

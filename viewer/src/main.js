@@ -153,7 +153,8 @@ function subscriptions() {
   const colour = $("colour").value;
   return {
     surface: { fields: [colour, "displacement"], region: "surface", dtype: "float32", every: 1 },
-    volume: { fields: [colour, "displacement", "level_set"], region: "volume", dtype: "float32", every: 1 },
+    // the tissue's top face only (1/nz of the volume's bytes), float16: enough to draw
+    volume: { fields: [colour, "displacement", "level_set"], region: "top", dtype: "float16", every: 1 },
   };
 }
 

@@ -180,9 +180,9 @@ def subscribe_frame(sim: Any, sub: Subscription, session_id: str, control_id: in
             raise BadRequestError(
                 f"unknown field {name!r}; available: {', '.join(available)}", field=f"fields.{i}"
             )
-        if sub.region == "surface" and sim.field(name).ndim == 1:
+        if sub.region != "volume" and sim.field(name).ndim == 1:
             raise BadRequestError(
-                f"{name!r} is per-element; the surface region carries nodal fields only",
+                f"{name!r} is per-element; the {sub.region} region carries nodal fields only",
                 field=f"fields.{i}",
             )
     return current_frame(sim, sub, session_id=session_id, control_id=control_id)

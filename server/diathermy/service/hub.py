@@ -20,7 +20,7 @@ import numpy as np
 
 from diathermy.service.encoding import encode_array, pack, sample_nodal
 
-Region = Literal["volume", "surface"]
+Region = Literal["volume", "top", "surface"]
 
 
 def finite(obj: Any) -> Any:
@@ -148,9 +148,12 @@ class Subscriber:
 
 
 def build_payload(sim: Any, sub: Subscription) -> dict[str, Any]:
-    """The arrays of a frame: volume fields, or the cut surface with fields sampled on it."""
+    """The arrays of a frame: volume fields, their top node layer (the tissue's top face,
+    (ny, nx[, 3]): 1 / nz of the bytes), or the cut surface with fields sampled on it."""
     if sub.region == "volume":
         return {"fields": {n: encode_array(sim.field(n), sub.dtype) for n in sub.fields}}
+    if sub.region == "top":  # z up: the last node layer is the top face
+        return {"fields": {n: encode_array(sim.field(n)[-1], sub.dtype) for n in sub.fields}}
     verts, faces = sim.cut_surface()
     verts = np.asarray(verts, dtype=float).reshape(-1, 3)
     grid = sim.grid

@@ -26,8 +26,10 @@ class Subscribe(_Msg):
     fields: list[str] = Field(default_factory=list, max_length=16)
     every: int = Field(1, ge=1, le=10_000, description="send every k-th step")
     dtype: Literal["float16", "float32"] = "float32"
-    region: Literal["volume", "surface"] = Field(
-        "volume", description="whole grid, or the cut surface with fields sampled on it"
+    region: Literal["volume", "top", "surface"] = Field(
+        "volume",
+        description="whole grid (nz, ny, nx[, 3]); its top node layer, the tissue's top face "
+        "(ny, nx[, 3]: 1/nz of the bytes); or the cut surface with fields sampled on it",
     )
 
 
