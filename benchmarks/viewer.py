@@ -249,7 +249,7 @@ def report(
         "playwright in Debian's chromium with `--use-angle=swiftshader` (software WebGL on the CPU),",
         "on a shared 2-core machine: read the ratios, not the absolute rates. Each session is first",
         "stepped over REST until it has cut; the page then shows two streams (the cut surface,",
-        "`region: surface`, and the tissue's top layer from `region: volume`, float32, every step).",
+        "`region: surface`, and the tissue's top face from `region: top`, float16, every step; until 2026-12-07 the whole volume, float32).",
         "",
         f"*Live* runs the session at the server's maximum rate for {seconds:g} s: frames received",
         "per second (both streams, two per step) are bounded by the engine's step rate; the page",
