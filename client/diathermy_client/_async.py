@@ -168,6 +168,7 @@ class AsyncClient:
         power_w: float | None = None,
         current_density_a_per_m2: float | None = None,
         active: bool | None = None,
+        max_voltage_v: float | None = None,
     ) -> ElectrodeAck:
         """Move, re-power or switch an electrode from the next step.
 
@@ -181,6 +182,7 @@ class AsyncClient:
                 power_w=power_w,
                 current_density_a_per_m2=current_density_a_per_m2,
                 active=active,
+                max_voltage_v=max_voltage_v,
             )
         )
 
@@ -405,6 +407,7 @@ class AsyncSession:
         power_w: float | None = None,
         current_density_a_per_m2: float | None = None,
         active: bool | None = None,
+        max_voltage_v: float | None = None,
     ) -> ElectrodeAck:
         """Change an electrode. Example: ``await session.set_electrode(active=False)``."""
         return await self.client.update_electrode(
@@ -414,6 +417,7 @@ class AsyncSession:
             power_w=power_w,
             current_density_a_per_m2=current_density_a_per_m2,
             active=active,
+            max_voltage_v=max_voltage_v,
         )
 
     async def electrodes(self) -> list[Electrode]:

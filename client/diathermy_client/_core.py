@@ -256,7 +256,8 @@ class ClientCore:
         body = ElectrodeUpdate(**changes).model_dump(exclude_none=True)
         if not body:
             raise ValueError(
-                "give at least one of position_m, power_w, current_density_a_per_m2, active"
+                "give at least one of position_m, power_w, current_density_a_per_m2, active, "
+                "max_voltage_v"
             )
         return Call(
             Request("PATCH", f"/v1/sessions/{_seg(session_id)}/electrodes/{_seg(name)}", json=body),

@@ -45,6 +45,7 @@ class ElectrodeUpdate(_Request):
     power_w: float | None = None
     current_density_a_per_m2: float | None = None
     active: bool | None = None
+    max_voltage_v: float | None = None  # the generator's voltage limit, V; 0 lifts it
 
 
 # ------------------------------------------------------------------ results

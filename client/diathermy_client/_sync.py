@@ -167,6 +167,7 @@ class Client:
         power_w: float | None = None,
         current_density_a_per_m2: float | None = None,
         active: bool | None = None,
+        max_voltage_v: float | None = None,
     ) -> ElectrodeAck:
         """Move, re-power or switch an electrode from the next step.
 
@@ -180,6 +181,7 @@ class Client:
                 power_w=power_w,
                 current_density_a_per_m2=current_density_a_per_m2,
                 active=active,
+                max_voltage_v=max_voltage_v,
             )
         )
 
@@ -398,6 +400,7 @@ class Session:
         power_w: float | None = None,
         current_density_a_per_m2: float | None = None,
         active: bool | None = None,
+        max_voltage_v: float | None = None,
     ) -> ElectrodeAck:
         """Change an electrode. Example: ``session.set_electrode(active=False)``."""
         return self.client.update_electrode(
@@ -407,6 +410,7 @@ class Session:
             power_w=power_w,
             current_density_a_per_m2=current_density_a_per_m2,
             active=active,
+            max_voltage_v=max_voltage_v,
         )
 
     def electrodes(self) -> list[Electrode]:

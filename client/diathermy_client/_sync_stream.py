@@ -158,6 +158,7 @@ class Stream:
         power_w: float | None = None,
         current_density_a_per_m2: float | None = None,
         active: bool | None = None,
+        max_voltage_v: float | None = None,
         tag: str | int | None = None,
     ) -> Ack:
         """Change an electrode before the next step; frames with ``control_id >= ack.control_id``
@@ -169,6 +170,7 @@ class Stream:
             power_w=power_w,
             current_density_a_per_m2=current_density_a_per_m2,
             active=active,
+            max_voltage_v=max_voltage_v,
         )
         return self._control(msg)
 

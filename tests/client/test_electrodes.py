@@ -43,3 +43,12 @@ def test_async_electrodes(live: LiveServer) -> None:
                 await client.get_electrode(s.id, "other")
 
     asyncio.run(main())
+
+
+def test_sdk_sets_and_reads_the_voltage_limit(client: Client) -> None:
+    s = client.create_session("default", grid=SMALL_GRID)
+    assert s.electrodes()[0].max_voltage_v is None
+    s.set_electrode(max_voltage_v=80.0)
+    assert s.electrodes()[0].max_voltage_v == 80.0
+    s.set_electrode(max_voltage_v=0.0)  # lifts it
+    assert s.electrodes()[0].max_voltage_v is None

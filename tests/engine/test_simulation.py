@@ -297,3 +297,27 @@ def test_scene_voltage_limit_is_validated(v):
         return
     with pytest.raises(ValidationError, match="max_voltage_v"):
         Electrode(max_voltage_v=float(v))
+
+
+def test_a_voltage_limit_set_at_run_time_holds_lifts_and_survives_a_checkpoint(tmp_path):
+    """set_electrode(max_voltage_v=V) limits from the next step, 0 lifts the scene's own limit,
+    and a checkpoint keeps the run-time limit (the restored run repeats the original)."""
+    sim = Simulation(tiny_scene(electrodes=[Electrode(position_m=(0.01, 0.005), power_w=30.0,
+                                                      max_voltage_v=1e3)]))  # fmt: skip
+    need = sim.step().effects["electric"].extra["voltage_v"]
+    sim.set_electrode("active", max_voltage_v=0.5 * need)
+    held = sim.step()
+    assert held.effects["electric"].extra["voltage_limited"]
+    current = held.effects["electric"].extra["current_a"]
+    assert held.delivered_power_w == pytest.approx(0.5 * need * current, rel=1e-9)
+    assert held.delivered_power_w < 0.3 * 30.0  # about a quarter: R barely moved in one step
+    sim.save_checkpoint(tmp_path / "c.h5")
+    again = Simulation.load_checkpoint(tmp_path / "c.h5")
+    a, b = sim.step(), again.step()
+    assert b.effects["electric"].extra["voltage_limited"]
+    assert a.delivered_power_w == b.delivered_power_w
+    assert np.array_equal(sim.state["temperature"], again.state["temperature"])
+    sim.set_electrode("active", max_voltage_v=0.0)  # lifts the scene's 1 kV too
+    assert sim.step().delivered_power_w == pytest.approx(30.0, rel=1e-12)
+    with pytest.raises(SceneError, match="max_voltage_v"):
+        sim.set_electrode("active", max_voltage_v=-1.0)

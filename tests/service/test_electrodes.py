@@ -121,3 +121,44 @@ def test_electrode_errors_name_the_field(live: LiveServer, api: httpx.Client) ->
         assert other.get(f"/v1/sessions/{sid}/electrodes/active").status_code == 404
     with live.client(None) as anonymous:
         assert anonymous.get(f"/v1/sessions/{sid}/electrodes").status_code == 401
+
+
+def test_the_generator_voltage_limit_is_set_and_lifted_live(
+    live: LiveServer, api: httpx.Client
+) -> None:
+    """PATCH max_voltage_v holds the electrode at that voltage from the next step (the report
+    says so and the power falls to V^2 / R), 0 lifts it, and a bad value is a 422 naming it."""
+    sid = api.post("/v1/sessions", json=SMALL).json()["id"]
+    free = api.post(f"/v1/sessions/{sid}/step").json()["reports"][-1]
+    need = free["effects"]["electric"]["extra"]["voltage_v"]
+    assert not free["effects"]["electric"]["extra"]["voltage_limited"]
+    r = api.patch(f"/v1/sessions/{sid}/electrodes/active", json={"max_voltage_v": 0.5 * need})
+    assert r.status_code == 200, r.text
+    assert one(api, sid)["max_voltage_v"] == 0.5 * need
+    held = api.post(f"/v1/sessions/{sid}/step").json()["reports"][-1]
+    extra = held["effects"]["electric"]["extra"]
+    assert extra["voltage_limited"] and extra["voltage_v"] == pytest.approx(0.5 * need, rel=1e-9)
+    assert held["delivered_power_w"] < 0.3 * free["delivered_power_w"]
+    api.patch(f"/v1/sessions/{sid}/electrodes/active", json={"max_voltage_v": 0})
+    assert one(api, sid)["max_voltage_v"] is None
+    lifted = api.post(f"/v1/sessions/{sid}/step").json()["reports"][-1]
+    assert not lifted["effects"]["electric"]["extra"]["voltage_limited"]
+    with connect(
+        f"{live.ws_url}/v1/sessions/{sid}/stream",
+        additional_headers={"Authorization": f"Bearer {TOKEN_A}"},
+        open_timeout=10,
+    ) as ws:  # the same from a stream control, read back once acknowledged
+        assert unpack(ws.recv(timeout=10))["type"] == "hello"
+        ws.send(json.dumps({"type": "electrode", "max_voltage_v": 90.0}))
+        while unpack(ws.recv(timeout=10))["type"] != "ack":
+            pass
+    assert one(api, sid)["max_voltage_v"] == 90.0
+    for bad in (-1, 1e9, "x"):
+        r = api.patch(f"/v1/sessions/{sid}/electrodes/active", json={"max_voltage_v": bad})
+        assert r.status_code == 422 and "max_voltage_v" in r.json()["field"], r.text
+    bad_scene = {
+        **CUT["scene"],
+        "electrodes": [{"position_m": [0.01, 0.005], "max_voltage_v": 1e9}],
+    }
+    r = api.post("/v1/sessions", json={"scene": bad_scene})
+    assert r.status_code == 422 and r.json()["field"] == "scene.electrodes.0.max_voltage_v"

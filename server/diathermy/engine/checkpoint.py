@@ -303,4 +303,5 @@ def _override(d: dict[str, Any]) -> ElectrodeOverride:
         power_w=d.get("power_w"),
         current_density_a_per_m2=d.get("current_density_a_per_m2"),
         active=d.get("active"),
+        max_voltage_v=d.get("max_voltage_v"),  # absent in checkpoints before 2026-12-07
     )

@@ -18,6 +18,8 @@ class ElectrodeOverride:
     power_w: float | None = None
     current_density_a_per_m2: float | None = None
     active: bool | None = None
+    max_voltage_v: float | None = None
+    """The generator's voltage limit in V; 0 lifts the scene's limit (None: the scene's)."""
 
 
 def _catmull_rom(points: np.ndarray, per_segment: int = 32) -> np.ndarray:
@@ -101,7 +103,9 @@ def electrode_pose(
             else o.current_density_a_per_m2
         ),
         active=bool(on),
-        max_voltage_v=el.max_voltage_v,
+        max_voltage_v=el.max_voltage_v
+        if o.max_voltage_v is None
+        else (o.max_voltage_v if o.max_voltage_v > 0 else None),
     )
 
 
@@ -114,8 +118,10 @@ def override_electrode(
     power_w: float | None = None,
     current_density_a_per_m2: float | None = None,
     active: bool | None = None,
+    max_voltage_v: float | None = None,
 ) -> ElectrodeOverride:
-    """``old`` with the given changes (None keeps a value; a new drive replaces the other).
+    """``old`` with the given changes (None keeps a value; a new drive replaces the other;
+    ``max_voltage_v`` 0 lifts the generator's voltage limit).
 
     Raises ``SceneError`` naming the field for an unknown electrode, a position off the top
     surface or a negative or non-finite drive.
@@ -134,6 +140,7 @@ def override_electrode(
     for field_name, value in (
         ("power_w", power_w),
         ("current_density_a_per_m2", current_density_a_per_m2),
+        ("max_voltage_v", max_voltage_v),
     ):
         if value is not None and not (np.isfinite(value) and value >= 0):
             raise SceneError(f"{field_name}: must be a finite number >= 0, got {value}")
@@ -148,4 +155,5 @@ def override_electrode(
             else (None if power_w is not None else old.current_density_a_per_m2)
         ),
         active=active if active is not None else old.active,
+        max_voltage_v=max_voltage_v if max_voltage_v is not None else old.max_voltage_v,
     )

@@ -170,8 +170,10 @@ class Simulation:
         power_w: float | None = None,
         current_density_a_per_m2: float | None = None,
         active: bool | None = None,
+        max_voltage_v: float | None = None,
     ) -> None:
-        """Change an electrode between steps (pose, drive, on/off); None keeps the current value."""
+        """Change an electrode between steps (pose, drive, on/off, the generator's voltage
+        limit: 0 lifts it); None keeps the current value."""
         self.state.overrides[name] = override_electrode(
             self.scene,
             name,
@@ -180,6 +182,7 @@ class Simulation:
             power_w=power_w,
             current_density_a_per_m2=current_density_a_per_m2,
             active=active,
+            max_voltage_v=max_voltage_v,
         )
 
     def step(self) -> StepReport:

@@ -17,12 +17,17 @@ MAX_CURRENT_DENSITY_A_PER_M2 = 1.0e7
 """Highest electrode current density accepted, A/m^2 (the default scene drives 5.72e4)."""
 
 
+MAX_VOLTAGE_V = 1.0e4
+"""Highest generator voltage limit accepted, V (electrosurgical outputs reach a few kV peak)."""
+
+
 def check_drive(scene: Scene) -> None:
     """Reject a scene whose electrodes are driven beyond the physical range (422 naming it)."""
     for i, el in enumerate(scene.electrodes):
         for name, value, top in (
             ("power_w", el.power_w, MAX_POWER_W),
             ("current_density_a_per_m2", el.current_density_a_per_m2, MAX_CURRENT_DENSITY_A_PER_M2),
+            ("max_voltage_v", el.max_voltage_v or 0.0, MAX_VOLTAGE_V),
         ):
             if value > top:
                 raise LimitExceededError(

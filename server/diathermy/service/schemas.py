@@ -7,7 +7,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, model_validator
 
 from diathermy.scene import Scene
-from diathermy.service.limits import MAX_CURRENT_DENSITY_A_PER_M2, MAX_POWER_W
+from diathermy.service.limits import MAX_CURRENT_DENSITY_A_PER_M2, MAX_POWER_W, MAX_VOLTAGE_V
 
 Number = Annotated[float, Field(strict=True)]
 """A JSON number (an integer is one); a bool or a numeric string is refused, not coerced."""
@@ -117,6 +117,13 @@ class ElectrodeUpdate(_In):
         le=MAX_CURRENT_DENSITY_A_PER_M2,
         allow_inf_nan=False,
         description="A/m^2; switches to current-density drive",
+    )
+    max_voltage_v: Number | None = Field(
+        None,
+        ge=0,
+        le=MAX_VOLTAGE_V,
+        allow_inf_nan=False,
+        description="generator voltage limit, V rms (0 lifts it): where the drive would need more, the electrode is held at it and delivers V^2 / R",
     )
     active: StrictBool | None = None
 
