@@ -48,6 +48,7 @@ QUICK_CUT = {
 }
 FIELDS = ["temperature", "displacement"]
 DTYPE = "float32"  # the stream clients' subscription (--dtype); forked clients inherit it
+REGION = "volume"  # and its region (--region)
 CLIENTS_PER_PROC = 4
 FULL_DECODE = False  # service_trace.py --full-decode: the old client
 STEADY = {"name": "default-electrothermal", "effects": ["electric", "thermal"]}
@@ -245,7 +246,8 @@ async def stream_client(
     ws = await open_client(url)
     try:
         await ws.recv(30.0)  # hello
-        ws.send_text(json.dumps({"type": "subscribe", "fields": FIELDS, "dtype": DTYPE}))
+        sub = {"type": "subscribe", "fields": FIELDS, "dtype": DTYPE, "region": REGION}
+        ws.send_text(json.dumps(sub))
         if rate_hz is not None:
             ws.send_text(json.dumps({"type": "run", "rate_hz": rate_hz}))
         frames: list[tuple[float, int, int]] = []  # (receive time, control_id, step) of each
@@ -620,7 +622,7 @@ def write_report(
         "# Service benchmark",
         "",
         f"`python benchmarks/service.py {meta['argv']}` — the real engine, fields "
-        f"{', '.join(FIELDS)} ({DTYPE} volume), loopback, {meta['seconds']} s per row, "
+        f"{', '.join(FIELDS)} ({DTYPE} {REGION}), loopback, {meta['seconds']} s per row, "
         f"{os.cpu_count()} cores shared by the server, the clients and other jobs (load average "
         f"{meta['load']}).",
         "",
@@ -660,7 +662,7 @@ def write_report(
         f"{DEFAULT_LABEL.split(' ')[0]}): a steady cost per step, so that rows compare "
         "like with like (with vaporization and mechanics a step costs ~100x more once the "
         "tissue boils, which happens within a row). Frames carry temperature and displacement "
-        f"({DTYPE} volume).",
+        f"({DTYPE} {REGION}).",
         "",
     ]
     for grid, alone, fan in tables:
@@ -796,6 +798,12 @@ def main() -> None:
         default="float32",
         help="the stream clients' subscription dtype (float16: 0.51x the bytes)",
     )
+    p.add_argument(
+        "--region",
+        choices=["volume", "top"],
+        default="volume",
+        help="the stream clients' subscription region (top: the top face, 1/nz of the bytes)",
+    )
     p.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "service.md"))
     p.add_argument(
         "--engine-cpus",
@@ -808,8 +816,8 @@ def main() -> None:
     if args.cmd == "serve-child":
         serve_child(args)
         return
-    global DTYPE
-    DTYPE = args.dtype
+    global DTYPE, REGION
+    DTYPE, REGION = args.dtype, args.region
     import tempfile
 
     slow_grid = [int(x) for x in args.slow_grid.split("x")]

@@ -23,7 +23,7 @@ def _load_benchmark() -> ModuleType:
 def test_service_benchmark_runs_tiny_and_writes_its_table(tmp_path: Path) -> None:
     out = tmp_path / "service.md"
     args = ["--grids", "5x5x9", "--slow-grid", "5x5x9", "--clients", "1,2", "--reps", "1"]
-    args += ["--dtype", "float16"]  # the clients' subscription, named in the header
+    args += ["--dtype", "float16", "--region", "top"]  # the clients' subscription, in the header
     run = subprocess.run(
         [sys.executable, str(SCRIPT), *args, "--seconds", "0.5", "--out", str(out)],
         capture_output=True,
@@ -32,7 +32,7 @@ def test_service_benchmark_runs_tiny_and_writes_its_table(tmp_path: Path) -> Non
     )
     assert run.returncode == 0, run.stderr[-3000:]
     text = out.read_text()
-    assert "CPU server / engine / clients" in text and "(float16 volume)" in text
+    assert "CPU server / engine / clients" in text and "(float16 top)" in text
     rows = [ln for ln in text.splitlines() if ln.startswith(("| 1 |", "| 2 |"))]
     assert len(rows) == 2, text
     for row in rows:

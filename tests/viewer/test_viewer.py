@@ -142,6 +142,11 @@ def test_viewer_drives_a_cutting_session(live: LiveServer, browser: Browser) -> 
         region = page.evaluate("window.viewer.fineRegionText({cut: 0.0021, vapor: 0.0})")
         assert region == "cut 2.1 mm beyond"
         assert page.evaluate("window.viewer.fineRegionText({cut: 0, vapor: 0})") == "inside"
+        # the electrode's voltage from the electric report (no limit in this scene)
+        assert page.evaluate("window.viewer.panel()['voltage']").endswith(" V")
+        extra = "{voltage_v: 150.2, voltage_limited: true}"
+        held = f"window.viewer.voltageText({{effects: {{electric: {{extra: {extra}}}}}}})"
+        assert page.evaluate(held) == "150 V (limited)"
         # every effect is on: nothing left out would act
         assert page.evaluate("window.viewer.panel()['left out']") == "none"
         left = page.evaluate("window.viewer.leftOutText({vaporization: 'T up to 400 K'})")

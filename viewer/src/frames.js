@@ -80,6 +80,14 @@ export function leftOutText(leftOut) {
   return names.length ? `${names.join(", ")} would act` : "none";
 }
 
+// The electrode's voltage from the step report's electric effect (V), and whether the
+// generator's voltage limit held it there; "-" when the electric solve did not run.
+export function voltageText(rep) {
+  const extra = rep && rep.effects && rep.effects.electric ? rep.effects.electric.extra : null;
+  if (!extra || extra.voltage_v === undefined) return "-";
+  return `${Number(extra.voltage_v).toFixed(0)} V${extra.voltage_limited ? " (limited)" : ""}`;
+}
+
 export function updatePanel(st, stats) {
   const s = st.last.surface;
   if (!s) return;
@@ -90,6 +98,7 @@ export function updatePanel(st, stats) {
   const rate = h.length > 1 ? (1000 * (h[h.length - 1][1] - h[0][1])) / (h[h.length - 1][0] - h[0][0] || 1) : 0;
   $("p-rate").textContent = rate.toFixed(1);
   $("p-power").textContent = rep ? fmt(rep.delivered_power_w, 1, "W") : "-";
+  $("p-voltage").textContent = voltageText(rep);
   $("p-tmax").textContent = rep ? `${rep.max_temperature_k.toFixed(0)} K (${(rep.max_temperature_k - 273.15).toFixed(0)} °C)` : "-";
   $("p-depth").textContent = rep ? fmt(1e3 * rep.crater_depth_m, 2, "mm") : "-";
   $("p-cut").textContent = rep ? fmt(1e9 * rep.cut_volume_m3, 2, "mm³") : "-";

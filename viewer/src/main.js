@@ -8,6 +8,7 @@ import {
   leftOutText,
   onMessage as receive,
   updatePanel as panel,
+  voltageText,
 } from "./frames.js";
 import { View } from "./render.js";
 import { Stream } from "./stream.js";
@@ -379,6 +380,7 @@ window.viewer = {
   screenOf(x, y) { return view.screenOf(x, y); },
   fineRegionText,
   leftOutText,
+  voltageText,
   drawFps,
   // Re-draws the newest frames n times (decode, geometry, colours, render, GPU sync): the
   // viewer's own frames per second, independent of how fast the server steps.
