@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from diathermy.errors import SceneError
 from diathermy.fem.edges import edge_stiffness
@@ -11,7 +13,12 @@ from diathermy.fem.geometry import structured_geometry
 from diathermy.fem.scalar import surface_load, volume_load
 from diathermy.mesh import Grid, TetMesh, build_tet_mesh
 from diathermy.physics.contact_load import contact_weights, disk_quadrature
-from diathermy.physics.driven_potential import DrivenPotential, ElectrodeDrive, voltage_limited
+from diathermy.physics.driven_potential import (
+    DrivenPotential,
+    ElectrodeDrive,
+    drive_current,
+    voltage_limited,
+)
 from diathermy.physics.electric import (
     WINDOW_MAX_NODES,
     PotentialSolver,
@@ -433,3 +440,26 @@ def test_rejects_bad_input(paper_meshes):
         contact_weights(mesh, PAPER_CENTER, -1.0)
     with pytest.raises(SceneError):
         ElectrodeDrive(mode="voltage")  # type: ignore[arg-type]
+
+
+@given(
+    mode=st.sampled_from(["power", "current_density"]),
+    power=st.floats(0.0, 1e3),
+    j=st.floats(0.0, 1e7),
+    area=st.floats(1e-8, 1e-3),
+    R=st.floats(1e-2, 1e7),
+    v_max=st.none() | st.floats(1e-3, 1e4),
+)
+def test_the_limited_current_is_the_drive_or_the_limit_whichever_is_less(
+    mode, power, j, area, R, v_max
+):
+    drive = ElectrodeDrive(mode, j, power, v_max)
+    nominal = drive_current(ElectrodeDrive(mode, j, power), area, R)
+    current = drive_current(drive, area, R)
+    if v_max is None or nominal * R <= v_max:  # the drive as set
+        assert current == nominal
+        if v_max is not None and nominal * R < v_max * (1 - 1e-9):
+            assert not voltage_limited(drive, current, R)
+    else:  # held at the limit: less current, exactly V_max at the electrode
+        assert current == pytest.approx(v_max / R, rel=1e-12) and current < nominal
+        assert voltage_limited(drive, current, R)
