@@ -10,8 +10,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, TypeAdapter
 
-from diathermy.service.limits import MAX_CURRENT_DENSITY_A_PER_M2, MAX_POWER_W, MAX_VOLTAGE_V
-from diathermy.service.schemas import Number
+from diathermy.service.schemas import CurrentDensity, MaxVoltage, Number, PowerW
 
 
 class _Msg(BaseModel):
@@ -41,16 +40,10 @@ class ElectrodeControl(_Msg):
     position_m: tuple[Number, Number] | None = Field(
         None, description="(x, y) on the top surface, m, within the block"
     )
-    power_w: Number | None = Field(None, ge=0, le=MAX_POWER_W, allow_inf_nan=False)
-    current_density_a_per_m2: Number | None = Field(
-        None, ge=0, le=MAX_CURRENT_DENSITY_A_PER_M2, allow_inf_nan=False
-    )
-    max_voltage_v: Number | None = Field(
-        None,
-        ge=0,
-        le=MAX_VOLTAGE_V,
-        allow_inf_nan=False,
-        description="generator voltage limit, V rms (0 lifts it)",
+    power_w: PowerW | None = None
+    current_density_a_per_m2: CurrentDensity | None = None
+    max_voltage_v: MaxVoltage | None = Field(
+        None, description="generator voltage limit, V rms (0 lifts it)"
     )
     active: StrictBool | None = None
     tag: str | int | None = Field(None, description="echoed in the ack")

@@ -12,6 +12,15 @@ from diathermy.service.limits import MAX_CURRENT_DENSITY_A_PER_M2, MAX_POWER_W, 
 Number = Annotated[float, Field(strict=True)]
 """A JSON number (an integer is one); a bool or a numeric string is refused, not coerced."""
 
+PowerW = Annotated[Number, Field(ge=0, le=MAX_POWER_W, allow_inf_nan=False)]
+"""An electrode's set power, W (REST and stream controls)."""
+CurrentDensity = Annotated[
+    Number, Field(ge=0, le=MAX_CURRENT_DENSITY_A_PER_M2, allow_inf_nan=False)
+]
+"""An electrode's set current density, A/m^2."""
+MaxVoltage = Annotated[Number, Field(ge=0, le=MAX_VOLTAGE_V, allow_inf_nan=False)]
+"""The generator's voltage limit, V rms; 0 lifts it."""
+
 
 class _In(BaseModel):
     model_config = ConfigDict(extra="forbid")
@@ -108,22 +117,14 @@ class ElectrodeUpdate(_In):
     position_m: tuple[Number, Number] | None = Field(
         None, description="(x, y) on the top surface, m, within the block"
     )
-    power_w: Number | None = Field(
-        None, ge=0, le=MAX_POWER_W, allow_inf_nan=False, description="W; switches to power drive"
+    power_w: PowerW | None = Field(None, description="W; switches to power drive")
+    current_density_a_per_m2: CurrentDensity | None = Field(
+        None, description="A/m^2; switches to current-density drive"
     )
-    current_density_a_per_m2: Number | None = Field(
+    max_voltage_v: MaxVoltage | None = Field(
         None,
-        ge=0,
-        le=MAX_CURRENT_DENSITY_A_PER_M2,
-        allow_inf_nan=False,
-        description="A/m^2; switches to current-density drive",
-    )
-    max_voltage_v: Number | None = Field(
-        None,
-        ge=0,
-        le=MAX_VOLTAGE_V,
-        allow_inf_nan=False,
-        description="generator voltage limit, V rms (0 lifts it): where the drive would need more, the electrode is held at it and delivers V^2 / R",
+        description="generator voltage limit, V rms (0 lifts it): where the drive would need "
+        "more, the electrode is held at it and delivers V^2 / R",
     )
     active: StrictBool | None = None
 
