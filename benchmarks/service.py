@@ -535,6 +535,11 @@ async def frame_sizes(server: Server, sid: str) -> list[dict[str, Any]]:
     return rows
 
 
+SLOW_MAX_S = 15.0
+"""Longest slow-client run: the server closes a client that has not answered its ping for the
+ping interval plus timeout (uvicorn's 20 + 20 s), and this one reads nothing."""
+
+
 def slow_client_memory(server: Server, sid: str, seconds: float) -> dict[str, Any]:
     from tests.service.rawws import RawWebSocket
 
@@ -845,7 +850,7 @@ def main() -> None:
             sizes = asyncio.run(frame_sizes(server, sid))
             print(sizes, flush=True)
             sid = server.session(slow_grid, STEADY)
-            slow = slow_client_memory(server, sid, seconds=2 * seconds[0])
+            slow = slow_client_memory(server, sid, seconds=min(2 * seconds[0], SLOW_MAX_S))
             slow_sizes = asyncio.run(frame_sizes(server, sid))
             slow["frame_bytes"] = slow_sizes[0]["bytes"]
             slow["grid"] = args.slow_grid

@@ -14,6 +14,7 @@ import base64
 import os
 import struct
 import time
+from collections import deque
 from typing import Any
 
 import msgpack
@@ -51,7 +52,8 @@ class _Protocol(asyncio.BufferedProtocol):
         self.view = memoryview(self.buf)
         self.filled = 0
         self.upgraded: asyncio.Future[None] = asyncio.get_running_loop().create_future()
-        self.messages: asyncio.Queue[tuple[float, int, bytes, int]] = asyncio.Queue()
+        self.messages: deque[tuple[float, int, bytes, int]] = deque()
+        self.waiter: asyncio.Future[None] | None = None  # the reader's, while it waits
         self.transport: asyncio.Transport | None = None
         self._remaining = 0  # payload bytes of the current frame still to come
         self._opcode = 0  # of the message being read
@@ -136,9 +138,15 @@ class _Protocol(asyncio.BufferedProtocol):
         if self._frame_op == 9:  # ping: answer pong
             self.send(0xA, bytes(self._control))
         elif self._frame_op == 8:
-            self.messages.put_nowait((t, 8, bytes(self._control), len(self._control)))
+            self._put((t, 8, bytes(self._control), len(self._control)))
         elif self._fin:
-            self.messages.put_nowait((t, self._opcode, bytes(self._head), self._length))
+            self._put((t, self._opcode, bytes(self._head), self._length))
+
+    def _put(self, message: tuple[float, int, bytes, int]) -> None:
+        """Hand a message to the reader (a deque and one future: no asyncio.Queue per frame)."""
+        self.messages.append(message)
+        if self.waiter is not None and not self.waiter.done():
+            self.waiter.set_result(None)
 
     def send(self, opcode: int, payload: bytes) -> None:
         """One masked frame (client frames must be)."""
@@ -158,7 +166,7 @@ class _Protocol(asyncio.BufferedProtocol):
     def connection_lost(self, exc: Exception | None) -> None:
         if not self.upgraded.done():
             self.upgraded.set_exception(exc or ConnectionError("connection closed"))
-        self.messages.put_nowait((time.monotonic(), 8, b"", 0))
+        self._put((time.monotonic(), 8, b"", 0))
 
 
 class RawStream:
@@ -184,9 +192,15 @@ class RawStream:
     async def recv(self, timeout_s: float) -> tuple[float, dict[str, Any]]:
         """The next message: (monotonic time its last byte arrived, its entries before the
         arrays); raises TimeoutError, or ConnectionError once the server closed."""
-        t, opcode, head, length = await asyncio.wait_for(
-            self.protocol.messages.get(), timeout=timeout_s
-        )
+        protocol = self.protocol
+        if not protocol.messages:  # a timer only when there is nothing to take yet
+            protocol.waiter = asyncio.get_running_loop().create_future()
+            try:
+                async with asyncio.timeout(timeout_s):
+                    await protocol.waiter
+            finally:
+                protocol.waiter = None
+        t, opcode, head, length = protocol.messages.popleft()
         if opcode == 8:
             raise ConnectionError("the server closed the stream")
         return t, read_head(head, length)

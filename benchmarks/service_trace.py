@@ -198,7 +198,7 @@ class _ConnectionReader:
         pass
 
 
-def _wake_all(slots: list[Any], now: int = 1) -> None:
+def _wake_all(slots: list[Any], sizes: list[int], now: int = 1) -> None:
     """The senders' wake-up before: all of them in one turn of the event loop."""
     for slot in slots:
         slot.wake()

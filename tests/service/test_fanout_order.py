@@ -1,19 +1,22 @@
 """Fan-out order: the client whose electrode control a frame first shows gets it written first,
-and the senders are woken one per turn of the event loop, so that the loop reads the sockets
-(a control, an ack to send) between two clients' writes of a large frame."""
+and the senders are woken a few hundred kB of frames per turn of the event loop, so that the loop
+reads the sockets (a control, an ack to send) between two clients' writes of a large frame, while
+small frames go out to every client in one turn."""
 
 from __future__ import annotations
 
 import asyncio
 
-from diathermy.service.hub import Frame, FrameSlot, StreamHub, Subscriber, Subscription
+from diathermy.service.hub import TURN_BYTES, Frame, FrameSlot, StreamHub, Subscriber, Subscription
 
 
-def _frame(control_id: int) -> Frame:
-    return Frame.encode({"type": "frame", "step": 3, "control_id": control_id})
+def _frame(control_id: int, nbytes: int = TURN_BYTES) -> Frame:
+    """A frame of about ``nbytes`` (default: one turn's worth, so one client per turn)."""
+    message = {"type": "frame", "step": 3, "control_id": control_id, "fields": b"x" * nbytes}
+    return Frame.encode(message)
 
 
-def _run_senders(awaiting: list[int], control_id: int) -> list[str]:
+def _run_senders(awaiting: list[int], control_id: int, nbytes: int = TURN_BYTES) -> list[str]:
     """Deliver one frame to subscribers with the given ``awaiting`` ids; the order of events
     (``sN``: sender N woke; ``after-N``: a callback sender N scheduled when it woke)."""
     loop = asyncio.new_event_loop()
@@ -33,7 +36,7 @@ def _run_senders(awaiting: list[int], control_id: int) -> list[str]:
         async def main() -> None:
             tasks = [asyncio.ensure_future(sender(i, s)) for i, s in enumerate(subs)]
             await asyncio.sleep(0)  # every sender waits on its slot
-            assert hub.deliver({Subscription(): _frame(control_id)}) == 0
+            assert hub.deliver({Subscription(): _frame(control_id, nbytes)}) == 0
             await asyncio.gather(*tasks)
             await asyncio.sleep(0)
 
@@ -49,11 +52,20 @@ def test_the_client_whose_control_the_frame_first_shows_is_written_first() -> No
     assert order == ["s2", "s0", "s1", "s3"]
 
 
-def test_senders_are_woken_one_per_turn_of_the_event_loop() -> None:
+def test_senders_of_large_frames_are_woken_one_per_turn_of_the_event_loop() -> None:
     order = _run_senders([0, 0, 0], control_id=1)
     # what sender 0 scheduled runs before sender 1 wakes: the loop turned (and polled) between
     assert order.index("after-0") < order.index("s1")
     assert order.index("after-1") < order.index("s2")
+
+
+def test_small_frames_go_to_every_client_in_one_turn() -> None:
+    # a top face of a few kB: sixteen writes cost less than sixteen polls of the sockets
+    order = _run_senders([0] * 16, control_id=1, nbytes=6_000)
+    assert order[:16] == [f"s{i}" for i in range(16)]
+    # a turn holds about TURN_BYTES: three frames of 0.4 x that go out two and one
+    order = _run_senders([0, 0, 0], control_id=1, nbytes=int(0.4 * TURN_BYTES))
+    assert order.index("s1") < order.index("after-0") < order.index("s2")
 
 
 def test_a_frame_showing_the_control_clears_the_wait() -> None:
