@@ -355,8 +355,7 @@ VARIANTS = {
     "now": {
         "what": "now: the raw client (header only, 4 clients per process), the frame showing a "
         "client's control written to it first, senders woken a turn's worth of frame bytes at a "
-        "time, replies read into "
-        "one reused buffer",
+        "time, replies read into one reused buffer",
         "full_decode": False,
         "per_proc": 4,
         "plain": False,
