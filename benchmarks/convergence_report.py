@@ -369,6 +369,61 @@ def _depth_lines(runs: dict[str, dict[str, np.ndarray]], deeper: list[str]) -> l
     return lines
 
 
+ENERGY_TIMES_S = (1.62, 3.0)
+"""Simulated times at which the Joule energy per removed volume is compared."""
+
+
+def joule_energy(d: dict[str, np.ndarray], t: float) -> float:
+    """Electric energy (J) delivered by simulated time ``t``: the steps' powers times dt."""
+    time_s, power = d["time_s"], d["power_w"]
+    return float(power[time_s <= t + 1e-9].sum() * float(d["dt_s"]))
+
+
+def _energy_lines(runs: dict[str, dict[str, np.ndarray]], keys: list[str]) -> list[str]:
+    """The Joule energy per removed volume at ``ENERGY_TIMES_S`` per graded run (those of
+    ``keys`` that reached the time), with the fit a + b h over the fine spacings h."""
+    lines = [
+        "",
+        "Energy per removed volume: the Joule energy delivered by t over the crater's volume at t. "
+        "What is not in the removed tissue heats the tissue that stays, and the grid gives the "
+        "crater's heated skin at least a cell's thickness, so this ratio carries the crater's "
+        "dependence on the grid (docs/resolution.md: it follows the lateral spacing, not the "
+        "vertical one). Fit a + b h by least squares over the runs at each time (h in mm); the "
+        "order over three spacings where there are three.",
+        "",
+        "| t s | run | fine mm | region mm | energy J | cut mm^3 | J/mm^3 |",
+        "|---:|---|---:|---:|---:|---:|---:|",
+    ]
+    fits = []
+    for t in ENERGY_TIMES_S:
+        rows = []
+        for k in keys:
+            d = runs[k]
+            if float(d["time_s"][-1]) < t - 1e-6:
+                continue
+            cut = _at(d["time_s"], d["cut_m3"], t) * 1e9
+            if not cut > 0:
+                continue
+            e = joule_energy(d, t)
+            rows.append((float(d["fine_mm"]), e / cut))
+            lines.append(
+                f"| {t:g} | {k} | {float(d['fine_mm']):g} | {_region_mm(d):g} | {e:.1f} | "
+                f"{cut:.1f} | {e / cut:.3f} |"
+            )
+        hs = sorted({h for h, _ in rows}, reverse=True)
+        if len(hs) >= 2:
+            b, a = np.polyfit([h for h, _ in rows], [r for _, r in rows], 1)
+            by_h = {h: np.mean([r for hh, r in rows if hh == h]) for h in hs}
+            order = observed_order(*(by_h[h] for h in hs[:3])) if len(hs) >= 3 else math.nan
+            fits.append(
+                f"- t = {t:g} s: J/mm^3 = {a:.3f} + {b:.3f} h (h -> 0: {a:.3f}; b / a = "
+                f"{b / a:.2f} per mm), observed order {_fmt(order)}; at the fit the 0.4 mm grid "
+                f"removes {100 * a / (a + 0.4 * b):.0f} % and the 0.2 mm grid "
+                f"{100 * a / (a + 0.2 * b):.0f} % of the volume per joule of h -> 0."
+            )
+    return lines + (["", *fits] if fits else [])
+
+
 def _length_mm(d: dict[str, np.ndarray]) -> float:
     """The run's non-local length of the cut driver in mm (0: the local law, older runs)."""
     return float(d["length_mm"]) if "length_mm" in d else 0.0
@@ -656,6 +711,7 @@ def report() -> None:
     ]
     lines += _surface_lines(runs, surfaced, fixed)
     lines += _depth_lines(every, deeper)
+    lines += _energy_lines(every, graded + deeper)
     lines += _cost_lines()
     if moving:
         lines += [

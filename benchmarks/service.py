@@ -507,8 +507,14 @@ def fan_out(server: Server, sid: str, n: int, seconds: float, rate_hz: float) ->
     }
 
 
+def set_clients_per_proc(n: int) -> None:
+    """How many stream clients share one forked client process (at least 1)."""
+    global CLIENTS_PER_PROC
+    CLIENTS_PER_PROC = max(1, n)
+
+
 def client_procs(n: int) -> int:
-    """Client processes for ``n`` clients: up to 4 clients each."""
+    """Client processes for ``n`` clients: up to ``CLIENTS_PER_PROC`` clients each."""
     return max(1, -(-n // CLIENTS_PER_PROC))
 
 
@@ -642,7 +648,8 @@ def write_report(
         "row is the median of the repetitions; the configurations run interleaved (alone, 1, 4, "
         "16, alone, ...) on fresh sessions, and *vs alone* is the median of each run's ratio to "
         "the alone run just before it, so that the shared machine's drifting load cancels. "
-        "Clients: up to 4 per forked client process (`service_client.py`), each a WebSocket "
+        f"Clients: up to {CLIENTS_PER_PROC} per forked client process (`service_client.py`, "
+        "`--clients-per-proc`), each a WebSocket "
         "client that reads every byte of every frame off its socket into one buffer and keeps "
         "only the message's header (step, `control_id`, report, `dropped`; the arrays come "
         "last and are skipped unread), so that the latency is the service's and not that of "
@@ -798,6 +805,14 @@ def main() -> None:
     p.add_argument("--reps", type=int, default=3, help="interleaved repetitions per grid")
     p.add_argument("--clients", default="1,4,16")
     p.add_argument(
+        "--clients-per-proc",
+        type=int,
+        default=CLIENTS_PER_PROC,
+        help="stream clients per forked client process (the clients share the server's CPUs "
+        "when placed: with small frames one event loop for all of them costs less than several; "
+        "with large ones several spread the reading)",
+    )
+    p.add_argument(
         "--dtype",
         choices=["float32", "float16"],
         default="float32",
@@ -827,6 +842,7 @@ def main() -> None:
 
     slow_grid = [int(x) for x in args.slow_grid.split("x")]
     engine_cpus = bench_engine_cpus(args.engine_cpus)
+    set_clients_per_proc(args.clients_per_proc)
     load = os.getloadavg()
     ticks = cpu_ticks()
     tables = []
