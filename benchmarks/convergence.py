@@ -80,12 +80,14 @@ def scene_for(
     contact: str | None = None,
     surface_mm: float | None = None,
     depth_mm: float | None = None,
+    fine_z_mm: float | None = None,
 ) -> Scene:
     """The fixed electrode (current-density drive) with its resolution at ``fine_mm`` (0: uniform
     33x33x65), or the moving electrode as shipped (``fine_mm`` None: its own grid); the cut
     driver's non-local length at ``length_mm``, the electrode's contact model at ``contact``,
-    the cell height at the top surface at ``surface_mm`` (None: the scene's; 0: fine_mm) and the
-    working region's depth at ``depth_mm`` (None: the scene's)."""
+    the cell height at the top surface at ``surface_mm`` (None: the scene's; 0: fine_mm), the
+    working region's depth at ``depth_mm`` (None: the scene's) and its cell height at
+    ``fine_z_mm`` (None: fine_mm)."""
     scene = builtin_scene("moving-electrode" if moving else "fixed-electrode")
     if fine_mm is not None and fine_mm <= 0:
         scene = scene.on_uniform_grid(UNIFORM)
@@ -104,6 +106,8 @@ def scene_for(
         base["resolution"] = {**base["resolution"], "surface_m": surface}
     if depth_mm is not None and base.get("resolution") is not None:
         base["resolution"] = {**base["resolution"], "depth_m": depth_mm * 1e-3}
+    if fine_z_mm is not None and base.get("resolution") is not None:
+        base["resolution"] = {**base["resolution"], "fine_z_m": fine_z_mm * 1e-3}
     return Scene.model_validate(base)
 
 
@@ -115,16 +119,19 @@ def tag_of(
     contact: str = "flat",
     surface_mm: float = 0.0,
     depth_mm: float = REGION_DEPTH_MM,
+    fine_z_mm: float | None = None,
 ) -> str:
     """The run's file tag: scene, grid, dt if not the default, the non-local length if any, the
-    contact model if not flat, the surface cell if refined, the region's depth if not 12 mm."""
+    contact model if not flat, the surface cell if refined, the region's depth if not 12 mm, the
+    region's cell height if not the fine spacing."""
     kind = "moving" if moving else "fixed"
     grid = "default" if fine_mm is None else "uniform" if fine_mm <= 0 else f"{fine_mm:g}mm"
     tag = f"{kind}_{grid}" + ("" if dt_s == DT_S else f"_dt{dt_s:g}")
     tag += f"_l{length_mm:g}" if length_mm > 0 else ""
     tag += "" if contact == "flat" else f"_{contact}"
     tag += f"_s{surface_mm:g}" if surface_mm > 0 else ""
-    return tag + ("" if depth_mm in (0.0, REGION_DEPTH_MM) else f"_d{depth_mm:g}")
+    tag += "" if depth_mm in (0.0, REGION_DEPTH_MM) else f"_d{depth_mm:g}"
+    return tag + ("" if fine_z_mm is None or fine_z_mm == fine_mm else f"_z{fine_z_mm:g}")
 
 
 def front_strain_energy(sim: Simulation) -> float:
@@ -164,10 +171,11 @@ def run(
     contact: str | None = None,
     surface_mm: float | None = None,
     depth_mm: float | None = None,
+    fine_z_mm: float | None = None,
 ) -> Path:
     scene = scene_for(
         fine_mm, moving=moving, dt_s=dt_s, length_mm=length_mm, contact=contact,
-        surface_mm=surface_mm, depth_mm=depth_mm,
+        surface_mm=surface_mm, depth_mm=depth_mm, fine_z_mm=fine_z_mm,
     )  # fmt: skip
     length_mm = scene.level_set.nonlocal_length_m * 1e3
     contact = scene.electrodes[0].contact
@@ -219,7 +227,7 @@ def run(
         profiles["profile_end"] = crater_profile(sim, centre)
     tag = tag_of(
         fine_mm, moving, dt_s, length_mm, contact, surface_mm,
-        REGION_DEPTH_MM if depth_mm is None else depth_mm,
+        REGION_DEPTH_MM if depth_mm is None else depth_mm, fine_z_mm,
     )  # fmt: skip
     out = RESULTS / f"convergence_{tag}.npz"
     arrays: dict[str, Any] = {**{k: np.asarray(v) for k, v in rec.items()}, **profiles}
@@ -227,6 +235,7 @@ def run(
         out,
         **arrays,
         fine_mm=res.fine_m * 1e3 if res is not None else 0.0,
+        fine_z_mm=res.fine_spacing_m[2] * 1e3 if res is not None else 0.0,
         depth_mm=res.depth_m * 1e3 if res is not None else 0.0,
         dt_s=scene.dt_s,
         kappa=sim.tissue.damage_kappa_j_per_m3,
@@ -429,6 +438,11 @@ def main(argv: list[str] | None = None) -> int:
         type=float,
         help=f"the working region's depth (default: the scene's, {REGION_DEPTH_MM:g} mm)",
     )
+    r.add_argument(
+        "--fine-z-mm",
+        type=float,
+        help="the working region's cell height (default: the fine spacing)",
+    )
     pw = sub.add_parser("power")
     pw.add_argument("--fine-mm", type=float, nargs="+", required=True)
     mj = sub.add_parser("main-job")
@@ -457,6 +471,7 @@ def main(argv: list[str] | None = None) -> int:
             contact=a.contact,
             surface_mm=a.surface_mm,
             depth_mm=a.depth_mm,
+            fine_z_mm=a.fine_z_mm,
         )
     elif a.cmd == "cost":
         surface_cost(a.fine_mm, a.surface_mm, a.warm, a.steps)

@@ -413,7 +413,7 @@ def _energy_lines(runs: dict[str, dict[str, np.ndarray]], keys: list[str]) -> li
         hs = sorted({h for h, _ in rows}, reverse=True)
         if len(hs) >= 2:
             b, a = np.polyfit([h for h, _ in rows], [r for _, r in rows], 1)
-            by_h = {h: np.mean([r for hh, r in rows if hh == h]) for h in hs}
+            by_h = {h: float(np.mean([r for hh, r in rows if hh == h])) for h in hs}
             order = observed_order(*(by_h[h] for h in hs[:3])) if len(hs) >= 3 else math.nan
             fits.append(
                 f"- t = {t:g} s: J/mm^3 = {a:.3f} + {b:.3f} h (h -> 0: {a:.3f}; b / a = "
@@ -422,6 +422,53 @@ def _energy_lines(runs: dict[str, dict[str, np.ndarray]], keys: list[str]) -> li
                 f"{100 * a / (a + 0.2 * b):.0f} % of the volume per joule of h -> 0."
             )
     return lines + (["", *fits] if fits else [])
+
+
+def _fine_z_mm(d: dict[str, np.ndarray]) -> float:
+    """The run's cell height over the working region in mm (its fine spacing unless set)."""
+    return float(d["fine_z_mm"]) if "fine_z_mm" in d else float(d["fine_mm"])
+
+
+def _cubic(d: dict[str, np.ndarray]) -> bool:
+    """Whether the run's working region has cubic cells (no cell height of its own)."""
+    return math.isclose(_fine_z_mm(d), float(d["fine_mm"]))
+
+
+def _axis_lines(runs: dict[str, dict[str, np.ndarray]], keys: list[str]) -> list[str]:
+    """The runs whose working region has a cell height of its own (``run --fine-z-mm``) beside
+    the cubic runs of the same width, at the time they all reached."""
+    if not keys:
+        return []
+    widths = sorted({float(runs[k]["fine_mm"]) for k in keys}, reverse=True)
+    rows = [
+        k
+        for k in runs
+        if k.startswith("fixed")
+        and float(runs[k]["fine_mm"]) in widths
+        and (k in keys or k == f"fixed_{float(runs[k]['fine_mm']):g}mm")
+    ]
+    t = min(float(runs[k]["time_s"][-1]) for k in rows)
+    lines = [
+        "",
+        f"Cell width against cell height (`run --fine-mm W --fine-z-mm H`: the working region's "
+        f"cells W wide and H tall), at t = {t:.2f} s: the crater's volume follows the width, its "
+        f"depth and the first cut the height.",
+        "",
+        "| run | width mm | height mm | nodes | first cut interp. s | cut mm^3 | depth mm "
+        "| cut / depth mm^2 | J/mm^3 | median step s |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for k in sorted(rows, key=lambda k: (-float(runs[k]["fine_mm"]), -_fine_z_mm(runs[k]))):
+        d = runs[k]
+        cut, depth = _at(d["time_s"], d["cut_m3"], t), _at(d["time_s"], d["depth_m"], t)
+        lines.append(
+            f"| {k} | {float(d['fine_mm']):g} | {_fine_z_mm(d):g} | {int(d['n_nodes'])} | "
+            f"{_fmt(summary(d)['cut_interp'], 1.0, 3)} | {_fmt(cut, 1e9)} | "
+            f"{_fmt(depth, 1e3)} | {_fmt(cut / depth if depth else math.nan, 1e6)} | "
+            f"{_fmt(joule_energy(d, t) / (cut * 1e9) if cut else math.nan, 1.0, 3)} | "
+            f"{float(np.median(d['wall_s'])):.2f} |"
+        )
+    return lines
 
 
 def _length_mm(d: dict[str, np.ndarray]) -> float:
@@ -563,7 +610,8 @@ def report() -> None:
         for p in RESULTS.glob("convergence_*.npz")
     }
     deeper = sorted(k for k, d in every.items() if k.startswith("fixed") and not _standard_depth(d))
-    runs = {k: d for k, d in every.items() if k not in deeper}
+    tall = sorted(k for k, d in every.items() if k.startswith("fixed") and not _cubic(d))
+    runs = {k: d for k, d in every.items() if k not in deeper and k not in tall}
     local = [
         k
         for k in runs
@@ -712,6 +760,7 @@ def report() -> None:
     lines += _surface_lines(runs, surfaced, fixed)
     lines += _depth_lines(every, deeper)
     lines += _energy_lines(every, graded + deeper)
+    lines += _axis_lines(every, tall)
     lines += _cost_lines()
     if moving:
         lines += [

@@ -232,3 +232,60 @@ def test_a_deeper_reference_region_sits_beside_its_twin(
         "| fixed_0.2mm_s0.05_d16 | 16 | 1000 | 3.00 | — | 2.02 | 3.00 | 3.75 | 15.00 | 0.640 | — |"
         in text
     )
+
+
+def _linear_law_run(h_mm: float, a: float, b: float, power_w: float = 20.0) -> dict:
+    """A synthetic run whose crater takes a + b h joules per mm^3 at every time."""
+    t = np.arange(1, 101) * 0.03
+    energy = power_w * t
+    return {
+        "time_s": t,
+        "power_w": np.full(t.shape, power_w),
+        "dt_s": np.array(0.03),
+        "cut_m3": energy / (a + b * h_mm) * 1e-9,
+        "depth_m": 4e-3 * t,
+        "fine_mm": np.array(h_mm),
+        "depth_mm": np.array(12.0),
+        "n_nodes": np.array(1000),
+        "wall_s": np.full(t.shape, 0.5),
+        "t_max_k": 300.0 + 100.0 * t,
+        "w_front": 1e4 * t,
+        "kappa": np.array(1e5),
+        "p_max_pa": np.full(t.shape, 2e5),
+        "max_rss_mib": np.array(100.0),
+    }
+
+
+def test_energy_per_removed_volume_recovers_a_linear_law(report: ModuleType) -> None:
+    """The Joule energy is the steps' powers times dt, and the fit over the spacings gives back
+    the law the runs were made with, first order."""
+    runs = {f"fixed_{h:g}mm": _linear_law_run(h, 0.95, 1.1) for h in (0.8, 0.4, 0.2)}
+    assert report.joule_energy(runs["fixed_0.4mm"], 1.62) == pytest.approx(20.0 * 1.62)
+    text = "\n".join(report._energy_lines(runs, sorted(runs)))
+    assert f"| 3 | fixed_0.4mm | 0.4 | 12 | 60.0 | {60 / 1.39:.1f} | 1.390 |" in text
+    assert (
+        "J/mm^3 = 0.950 + 1.100 h (h -> 0: 0.950; b / a = 1.16 per mm), observed order 1.00" in text
+    )
+    assert f"the 0.4 mm grid removes {100 * 0.95 / 1.39:.0f} %" in text
+
+
+def test_a_cell_height_of_its_own_is_its_own_run(bench: ModuleType, report: ModuleType) -> None:
+    """``run --fine-z-mm``: the scene's cell height, its own tag, out of the cubic ladders, and
+    beside the cubic run of the same width."""
+    scene = bench.scene_for(0.8, moving=False, fine_z_mm=0.2)
+    assert scene.resolution.fine_spacing_m == pytest.approx((0.8e-3, 0.8e-3, 0.2e-3))
+    assert bench.tag_of(0.8, False, fine_z_mm=0.2) == "fixed_0.8mm_z0.2"
+    assert bench.tag_of(0.8, False, fine_z_mm=0.8) == "fixed_0.8mm"
+    cubic = _linear_law_run(0.8, 0.95, 1.1)
+    tall = {**_linear_law_run(0.8, 0.95, 1.1), "fine_z_mm": np.array(0.2)}
+    tall["depth_m"] = 2 * tall["depth_m"]  # twice as deep, the same volume
+    assert report._cubic(cubic) and not report._cubic(tall)
+    runs = {"fixed_0.8mm": cubic, "fixed_0.8mm_z0.2": tall}
+    text = "\n".join(report._axis_lines(runs, ["fixed_0.8mm_z0.2"]))
+    assert "at t = 3.00 s" in text
+    rows = [line for line in text.splitlines() if line.startswith("| fixed_")]
+    assert [r.split(" | ")[0:3] for r in rows] == [
+        ["| fixed_0.8mm", "0.8", "0.8"],
+        ["| fixed_0.8mm_z0.2", "0.8", "0.2"],
+    ]
+    assert "| 12.00 |" in rows[0] and "| 24.00 |" in rows[1]  # depth at 3 s, mm

@@ -114,6 +114,9 @@ BAD = {
     "margin_m": st.one_of(st.floats(max_value=-1e-9), st.floats(min_value=0.1001)),
     "depth_m": st.one_of(st.floats(max_value=0.0), st.floats(min_value=1.001)),
     "surface_m": st.one_of(st.floats(max_value=1.9e-5), st.floats(min_value=0.0501)),
+    "fine_z_m": st.one_of(
+        st.floats(max_value=1.9e-5), st.floats(min_value=0.051), st.just(math.inf)
+    ),
 }
 
 
@@ -123,6 +126,28 @@ def test_bad_values_name_the_field(bad):
     field, value = bad
     with pytest.raises(ValidationError, match=f"resolution.{field}"):
         with_resolution("fixed-electrode", **{field: value})
+
+
+def test_a_cell_height_of_its_own_refines_z_alone():
+    """``fine_z_m`` sets the working region's cell height; its width stays fine_m, and the
+    grid is the one ``Grid.graded`` makes with the per-axis spacings."""
+    flat = with_resolution("fixed-electrode", fine_m=1e-3)
+    tall = with_resolution("fixed-electrode", fine_m=1e-3, fine_z_m=0.25e-3)
+    assert tall.resolution is not None and tall.resolution.fine_spacing_m == (1e-3, 1e-3, 0.25e-3)
+    g0, g1 = flat.node_grid(), tall.node_grid()
+    assert g1.axes()[0].tolist() == g0.axes()[0].tolist()  # x and y as before
+    assert g1.axes()[1].tolist() == g0.axes()[1].tolist()
+    z = g1.axes()[2]
+    inside = z[:-1] >= tall.block_m[2] - tall.resolution.depth_m - 1e-12
+    assert np.diff(z)[inside].max() <= 0.25e-3 + 1e-12
+    assert g1.nz > g0.nz
+    assert Resolution(fine_m=1e-3).fine_spacing_m == (1e-3, 1e-3, 1e-3)
+    # a surface refinement shrinks from the cell height, which it must not exceed
+    Resolution(fine_m=1e-3, fine_z_m=0.5e-3, surface_m=0.2e-3)
+    with pytest.raises(ValidationError, match=r"surface_m .* must not exceed fine_z_m"):
+        Resolution(fine_m=1e-3, fine_z_m=0.5e-3, surface_m=0.6e-3)
+    with pytest.raises(ValidationError, match="max_cell_m .* must be at least fine_z_m"):
+        Resolution(fine_m=1e-3, fine_z_m=3e-3, max_cell_m=2e-3)
 
 
 def test_inconsistent_or_huge_requests_are_refused():

@@ -341,7 +341,7 @@ class Scene(_Model):
             if n > MAX_GRADED_NODES:
                 raise ValueError(
                     f"resolution: the graded grid would have {n} nodes (at most "
-                    f"{MAX_GRADED_NODES}): raise fine_m, growth or max_cell_m"
+                    f"{MAX_GRADED_NODES}): raise fine_m, fine_z_m, growth or max_cell_m"
                 )
         return self
 

@@ -1,8 +1,8 @@
 """Where a scene puts its nodes: a graded grid, fine over the working region under the electrodes.
 
 The ``resolution`` section of a scene (issue #21) replaces the uniform ``grid`` by a graded
-tensor-product grid (``Grid.graded``): cells of at most ``fine_m`` over a working box, growing by
-``growth`` per cell (capped at ``max_cell_m``) to the block's faces. The working box is given, or
+tensor-product grid (``Grid.graded``): cells of at most ``fine_m`` over a working box (``fine_z_m``
+in z where given), growing by ``growth`` per cell (capped at ``max_cell_m``) to the block's faces. The working box is given, or
 by default the electrodes' contacts (a path's bounding box for a moving electrode) plus
 ``margin_m`` sideways and ``depth_m`` down from the top surface. ``surface_m`` (optional) shrinks
 the box's cells toward its top side to that height, by the same growth ratio.
@@ -36,6 +36,12 @@ class Resolution(BaseModel):
     fine_m: Annotated[float, Field(ge=2e-5, le=0.05, allow_inf_nan=False)] = Field(
         0.4e-3, description="largest cell over the working region, m"
     )
+    fine_z_m: Annotated[float, Field(ge=2e-5, le=0.05, allow_inf_nan=False)] | None = Field(
+        None,
+        description="largest cell height (z) over the working region, m; None: fine_m. The "
+        "crater's depth and the first cut follow the cell height, its volume the cells' width "
+        "(fine_m; docs/resolution.md)",
+    )
     growth: Annotated[float, Field(ge=1.0, le=2.0, allow_inf_nan=False)] = Field(
         1.25, description="largest ratio of neighbouring cells away from the working region"
     )
@@ -62,19 +68,28 @@ class Resolution(BaseModel):
 
     @model_validator(mode="after")
     def _consistent(self) -> Resolution:
-        if self.max_cell_m < self.fine_m:
+        for name, fine in (("fine_m", self.fine_m), ("fine_z_m", self.fine_z_m)):
+            if fine is not None and self.max_cell_m < fine:
+                raise ValueError(
+                    f"max_cell_m ({self.max_cell_m} m) must be at least {name} ({fine} m)"
+                )
+        height = "fine_z_m" if self.fine_z_m is not None else "fine_m"
+        if self.surface_m is not None and self.surface_m > self.fine_spacing_m[2]:
             raise ValueError(
-                f"max_cell_m ({self.max_cell_m} m) must be at least fine_m ({self.fine_m} m)"
-            )
-        if self.surface_m is not None and self.surface_m > self.fine_m:
-            raise ValueError(
-                f"surface_m ({self.surface_m} m) must not exceed fine_m ({self.fine_m} m)"
+                f"surface_m ({self.surface_m} m) must not exceed {height} "
+                f"({self.fine_spacing_m[2]} m)"
             )
         if self.region_m is not None:
             lo, hi = self.region_m
             if any(b < a for a, b in zip(lo, hi, strict=True)):
                 raise ValueError(f"region_m: high corner {hi} must not lie below the low {lo}")
         return self
+
+    @property
+    def fine_spacing_m(self) -> tuple[float, float, float]:
+        """The working region's largest cell along (x, y, z) in m."""
+        z = self.fine_m if self.fine_z_m is None else self.fine_z_m
+        return (self.fine_m, self.fine_m, z)
 
 
 class _Path(Protocol):
@@ -149,7 +164,7 @@ def graded_grid(
     return Grid.graded(
         lo,
         hi,
-        resolution.fine_m,
+        resolution.fine_spacing_m,
         growth=resolution.growth,
         max_cell_m=resolution.max_cell_m,
         top_cell_m=resolution.surface_m,
