@@ -1,11 +1,12 @@
 """Where a scene puts its nodes: a graded grid, fine over the working region under the electrodes.
 
 The ``resolution`` section of a scene (issue #21) replaces the uniform ``grid`` by a graded
-tensor-product grid (``Grid.graded``): cells of at most ``fine_m`` over a working box (``fine_z_m``
-in z where given), growing by ``growth`` per cell (capped at ``max_cell_m``) to the block's faces. The working box is given, or
-by default the electrodes' contacts (a path's bounding box for a moving electrode) plus
-``margin_m`` sideways and ``depth_m`` down from the top surface. ``surface_m`` (optional) shrinks
-the box's cells toward its top side to that height, by the same growth ratio.
+tensor-product grid (``Grid.graded``): cells of at most ``fine_m`` over a working box
+(``fine_z_m`` in z where given), growing by ``growth`` per cell (capped at ``max_cell_m``) to the
+block's faces. The working box is given, or by default the electrodes' contacts (a path's
+bounding box for a moving electrode) plus ``margin_m`` sideways and ``depth_m`` down from the
+top surface. ``surface_m`` (optional) shrinks the box's cells toward its top side to that height,
+by the same growth ratio.
 """
 
 from __future__ import annotations
