@@ -1,6 +1,6 @@
-"""A tiny run of benchmarks/convergence.py: its scene family, the sub-step crossing times and
-the tables of benchmarks/convergence_report.py, and a run -> report round trip on a coarse graded
-grid."""
+"""A tiny run of benchmarks/convergence.py: its scene family, the sub-step crossing times
+(convergence_runs.py), the tables of convergence_report.py and convergence_crater.py, and a
+run -> report round trip on a coarse graded grid."""
 
 from __future__ import annotations
 
@@ -25,12 +25,22 @@ def report() -> ModuleType:
     return load_benchmark("convergence_report")
 
 
-def test_crossing_is_exact_for_a_linear_rise(report: ModuleType) -> None:
+@pytest.fixture(scope="module")
+def saved() -> ModuleType:
+    return load_benchmark("convergence_runs")
+
+
+@pytest.fixture(scope="module")
+def crater() -> ModuleType:
+    return load_benchmark("convergence_crater")
+
+
+def test_crossing_is_exact_for_a_linear_rise(saved: ModuleType) -> None:
     t = np.array([0.03, 0.06, 0.09, 0.12])
     v = 310.0 + 600.0 * t  # passes 373.15 K at t = 0.10525 s, inside the 4th step
-    assert report.crossing(t, v, 373.15, 310.0) == pytest.approx(63.15 / 600.0, rel=1e-12)
-    assert report.crossing(t, v, 320.0, 310.0) == pytest.approx(10.0 / 600.0, rel=1e-12)
-    assert math.isnan(report.crossing(t, v, 1e4, 310.0))
+    assert saved.crossing(t, v, 373.15, 310.0) == pytest.approx(63.15 / 600.0, rel=1e-12)
+    assert saved.crossing(t, v, 320.0, 310.0) == pytest.approx(10.0 / 600.0, rel=1e-12)
+    assert math.isnan(saved.crossing(t, v, 1e4, 310.0))
 
 
 def test_scene_family(bench: ModuleType) -> None:
@@ -64,11 +74,11 @@ def test_run_then_report(
     assert (tmp_path / "convergence.png").stat().st_size > 0
 
 
-def test_drilling_rate_is_the_depth_slope(report: ModuleType) -> None:
+def test_drilling_rate_is_the_depth_slope(saved: ModuleType) -> None:
     t = np.arange(1, 61) * 0.03
     d = {"time_s": t, "depth_m": 1e-3 + 4e-3 * t}  # 4 mm/s
-    assert report.drilling_rate(d) == pytest.approx(4e-3, rel=1e-9)
-    assert math.isnan(report.drilling_rate({"time_s": t[:30], "depth_m": t[:30]}))  # ends early
+    assert saved.drilling_rate(d) == pytest.approx(4e-3, rel=1e-9)
+    assert math.isnan(saved.drilling_rate({"time_s": t[:30], "depth_m": t[:30]}))  # ends early
 
 
 def test_nonlocal_run_and_probe_then_report(
@@ -91,11 +101,11 @@ def test_nonlocal_run_and_probe_then_report(
 
 
 def test_ladder_compares_each_contact_at_the_finest_draped_end(
-    report: ModuleType, monkeypatch
+    crater: ModuleType, monkeypatch
 ) -> None:
     """The draped ladder and the flat one at the time the finest draped run reached, each
     against its own finest run; a run that stopped earlier shows - in the variants' table."""
-    monkeypatch.setattr(report, "summary", lambda d: {"cut_interp": 0.05})
+    monkeypatch.setattr(crater, "summary", lambda d: {"cut_interp": 0.05})
     t_long, t_short = np.arange(1, 11) * 0.1, np.arange(1, 6) * 0.1
 
     def run(fine: float, scale: float, t: np.ndarray, contact: str) -> dict[str, np.ndarray]:
@@ -113,7 +123,7 @@ def test_ladder_compares_each_contact_at_the_finest_draped_end(
         "fixed_0.4mm_draped": run(0.4, 0.9, t_long, "draped"),
         "fixed_0.2mm_draped": run(0.2, 1.0, t_short, "draped"),
     }
-    text = "\n".join(report._variant_lines(runs, ["fixed_0.4mm_draped", "fixed_0.2mm_draped"]))
+    text = "\n".join(crater.variant_lines(runs, ["fixed_0.4mm_draped", "fixed_0.2mm_draped"]))
     assert "cut 0.50 s mm^3" in text and "cut 1.00 s mm^3" in text
     assert "| 0.2 mm | 0 | draped | 0.50 |" in text and "| - | - | - |" in text
     assert (
@@ -194,12 +204,12 @@ def test_surface_cost_steps_both_grids_and_reports_the_ratio(
     plain, refined = c["runs"]["plain"], c["runs"]["surface"]
     assert refined["nodes"] > plain["nodes"] and refined["surface_mm"] == 1.0
     assert plain["median_s"] > 0 and "electric" in refined["effects_median_s"]
-    text = "\n".join(report._cost_lines())
+    text = "\n".join(report._cost_lines(tmp_path))
     assert "Refined / plain: median step" in text and "| 1 |" in text
 
 
 def test_a_deeper_reference_region_sits_beside_its_twin(
-    bench: ModuleType, report: ModuleType
+    bench: ModuleType, saved: ModuleType, crater: ModuleType
 ) -> None:
     """``run --depth-mm``: its own tag, kept out of the ladders, and shown beside the same run
     at the scene's depth with the 0.4 mm runs' crater against each."""
@@ -222,8 +232,8 @@ def test_a_deeper_reference_region_sits_beside_its_twin(
         "fixed_0.2mm_s0.05": run(1.0, 12.0),
         "fixed_0.2mm_s0.05_d16": run(1.25, 16.0),
     }
-    assert not report._standard_depth(runs["fixed_0.2mm_s0.05_d16"])
-    text = "\n".join(report._depth_lines(runs, ["fixed_0.2mm_s0.05_d16"]))
+    assert not saved.standard_depth(runs["fixed_0.2mm_s0.05_d16"])
+    text = "\n".join(crater.depth_lines(runs, ["fixed_0.2mm_s0.05_d16"]))
     assert (
         "| fixed_0.2mm_s0.05 | 12 | 1000 | 3.00 | 2.43 | 1.62 | 2.40 | 3.00 | 15.00 | 0.800 | — |"
         in text
@@ -256,12 +266,14 @@ def _linear_law_run(h_mm: float, a: float, b: float, power_w: float = 20.0) -> d
     }
 
 
-def test_energy_per_removed_volume_recovers_a_linear_law(report: ModuleType) -> None:
+def test_energy_per_removed_volume_recovers_a_linear_law(
+    saved: ModuleType, crater: ModuleType
+) -> None:
     """The Joule energy is the steps' powers times dt, and the fit over the spacings gives back
     the law the runs were made with, first order."""
     runs = {f"fixed_{h:g}mm": _linear_law_run(h, 0.95, 1.1) for h in (0.8, 0.4, 0.2)}
-    assert report.joule_energy(runs["fixed_0.4mm"], 1.62) == pytest.approx(20.0 * 1.62)
-    text = "\n".join(report._energy_lines(runs, sorted(runs)))
+    assert saved.joule_energy(runs["fixed_0.4mm"], 1.62) == pytest.approx(20.0 * 1.62)
+    text = "\n".join(crater.energy_lines(runs, sorted(runs)))
     assert f"| 3 | fixed_0.4mm | 0.4 | 12 | 60.0 | {60 / 1.39:.1f} | 1.390 |" in text
     assert (
         "J/mm^3 = 0.950 + 1.100 h (h -> 0: 0.950; b / a = 1.16 per mm), observed order 1.00" in text
@@ -269,7 +281,9 @@ def test_energy_per_removed_volume_recovers_a_linear_law(report: ModuleType) -> 
     assert f"the 0.4 mm grid removes {100 * 0.95 / 1.39:.0f} %" in text
 
 
-def test_a_cell_height_of_its_own_is_its_own_run(bench: ModuleType, report: ModuleType) -> None:
+def test_a_cell_height_of_its_own_is_its_own_run(
+    bench: ModuleType, saved: ModuleType, crater: ModuleType
+) -> None:
     """``run --fine-z-mm``: the scene's cell height, its own tag, out of the cubic ladders, and
     beside the cubic run of the same width."""
     scene = bench.scene_for(0.8, moving=False, fine_z_mm=0.2)
@@ -279,9 +293,9 @@ def test_a_cell_height_of_its_own_is_its_own_run(bench: ModuleType, report: Modu
     cubic = _linear_law_run(0.8, 0.95, 1.1)
     tall = {**_linear_law_run(0.8, 0.95, 1.1), "fine_z_mm": np.array(0.2)}
     tall["depth_m"] = 2 * tall["depth_m"]  # twice as deep, the same volume
-    assert report._cubic(cubic) and not report._cubic(tall)
+    assert saved.cubic(cubic) and not saved.cubic(tall)
     runs = {"fixed_0.8mm": cubic, "fixed_0.8mm_z0.2": tall}
-    text = "\n".join(report._axis_lines(runs, ["fixed_0.8mm_z0.2"]))
+    text = "\n".join(crater.axis_lines(runs, ["fixed_0.8mm_z0.2"]))
     assert "at t = 3.00 s" in text
     rows = [line for line in text.splitlines() if line.startswith("| fixed_")]
     assert [r.split(" | ")[0:3] for r in rows] == [
