@@ -20,7 +20,6 @@ import asyncio
 import json
 import multiprocessing
 import os
-import resource
 import socket
 import statistics
 import subprocess
@@ -36,6 +35,15 @@ import httpx  # noqa: E402
 from websockets.asyncio.client import connect  # noqa: E402
 
 from benchmarks.service_client import RawStream  # noqa: E402
+from benchmarks.service_procs import (  # noqa: E402
+    children_cpu_s,
+    cpu_ticks,
+    rss_mib,
+    run_queue_s,
+    steal_share,
+    tree_cpu_s,
+)
+from benchmarks.service_tables import write_report  # noqa: E402
 from diathermy.scene.builtin import builtin_scene  # noqa: E402
 from diathermy.service.cpus import format_cpus, parse_cpus  # noqa: E402
 from diathermy.service.encoding import unpack  # noqa: E402
@@ -52,13 +60,14 @@ REGION = "volume"  # and its region (--region)
 CLIENTS_PER_PROC = 4
 FULL_DECODE = False  # service_trace.py --full-decode: the old client
 STEADY = {"name": "default-electrothermal", "effects": ["electric", "thermal"]}
+"""The built-in default scene (50 W) without vaporization and mechanics: a steady step cost, so
+that rows compare like with like (with them, steps slow ~100x once the tissue boils)."""
 DEFAULT_RESOLUTION = builtin_scene("default").resolution.model_dump(mode="json")  # type: ignore[union-attr]
 """The default scene's graded grid (``--grids default``)."""
 DEFAULT_LABEL = (
     "x".join(map(str, builtin_scene("default").node_shape)) + " (the default scene's graded grid)"
 )
-"""The built-in default scene (50 W) without vaporization and mechanics: a steady step cost, so
-that rows compare like with like (with them, steps slow ~100x once the tissue boils)."""
+"""The heading of the default grid's table."""
 
 
 def serve_child(args: argparse.Namespace) -> None:
@@ -94,13 +103,6 @@ def serve_child(args: argparse.Namespace) -> None:
         access_log=False,
         ws_max_size=settings.max_message_bytes,
     )
-
-
-def rss_mib(pid: int) -> tuple[float, float]:
-    """(current, peak) resident set of a process in MiB."""
-    status = Path(f"/proc/{pid}/status").read_text()
-    val = {ln.split(":")[0]: ln.split()[1] for ln in status.splitlines() if ln.startswith("Vm")}
-    return int(val["VmRSS"]) / 1024, int(val["VmHWM"]) / 1024
 
 
 def free_port() -> int:
@@ -347,63 +349,6 @@ def engine_alone(server: Server, sid: str, seconds: float) -> float:
     return steps / (time.monotonic() - t0)
 
 
-def cpu_s(pid: int) -> float:
-    """CPU seconds (user + system, all threads) a process has used."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
-def children_cpu_s() -> float:
-    """CPU seconds of the benchmark's client processes that have ended (forked and joined)."""
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
-
-
-def descendants(pid: int) -> list[int]:
-    """Child processes of ``pid``, recursively (the forkserver and the engine processes)."""
-    out: list[int] = []
-    for task in Path(f"/proc/{pid}/task").glob("*/children"):
-        for child in task.read_text().split():
-            out += [int(child), *descendants(int(child))]
-    return out
-
-
-def cpu_ticks() -> tuple[int, int]:
-    """(steal, total) clock ticks of all CPUs so far (``/proc/stat``): steal is the time the
-    hypervisor ran other virtual machines on this one's CPUs."""
-    fields = [int(x) for x in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]]
-    return fields[7], sum(fields[:8])
-
-
-def steal_share(start: tuple[int, int]) -> float:
-    """Share of the CPUs' time since ``start`` (``cpu_ticks``) that the host took."""
-    steal, total = cpu_ticks()
-    return (steal - start[0]) / max(1, total - start[1])
-
-
-def run_queue_s(pid: int) -> float:
-    """Seconds the processes under ``pid`` (the engines) spent runnable but waiting for a CPU
-    (``/proc/<pid>/schedstat``, main threads)."""
-    total = 0.0
-    for child in descendants(pid):
-        try:
-            total += int(Path(f"/proc/{child}/schedstat").read_text().split()[1]) / 1e9
-        except (FileNotFoundError, ProcessLookupError, IndexError):
-            continue
-    return total
-
-
-def tree_cpu_s(pid: int) -> tuple[float, dict[int, float]]:
-    """(CPU seconds of ``pid``, {descendant pid: its CPU seconds})."""
-    kids = {}
-    for child in descendants(pid):
-        try:
-            kids[child] = cpu_s(child)
-        except (FileNotFoundError, ProcessLookupError):
-            continue
-    return cpu_s(pid), kids
-
-
 def grid_rows(
     server: Server, grid: list[int] | None, clients: list[int], seconds: float, reps: int
 ) -> tuple[float, list[dict[str, Any]]]:
@@ -579,179 +524,6 @@ def slow_client_memory(server: Server, sid: str, seconds: float) -> dict[str, An
     }
 
 
-def fan_table(grid: str, alone: float, fan: list[dict[str, Any]]) -> list[str]:
-    """The streaming table of one grid, with the targets checked."""
-    lines = [
-        f"### Grid {grid}" if grid != "default" else f"### Grid {DEFAULT_LABEL}",
-        "",
-        f"Engine alone (REST steps, no stream client): **{alone:.1f} steps/s** "
-        f"({1e3 / alone:.1f} ms per step), median of {fan[0]['reps']} runs; the engine waited "
-        f"for a CPU {100 * fan[0]['alone_wait']:.0f} % of the time.",
-        "",
-        "| clients | steps/s | vs alone | frames/s per client | per client / steps/s | "
-        "latency p50 ms | latency p99 ms | p99 bound ms | samples | frames dropped | "
-        "engine step ms p50 / p99 / max | p99 beyond its two steps ms | "
-        "CPU server / engine / clients | engine waits for a CPU | host steal | targets |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
-    ]
-    for r in fan:
-        bound = r["p99_bound_ms"]
-        fps_ok = r["fps_per_client"] >= 0.9 * r["steps_per_s"]
-        rate_ok = r["clients"] != 16 or r["vs_alone"] >= 0.9
-        lat_ok = r["p99_ms"] <= bound
-        verdict = (
-            "met"
-            if fps_ok and rate_ok and lat_ok
-            else "MISSED "
-            + ", ".join(
-                name
-                for name, ok in (("fps", fps_ok), ("steps/s", rate_ok), ("p99", lat_ok))
-                if not ok
-            )
-        )
-        lines.append(
-            f"| {r['clients']} | {r['steps_per_s']:.1f} | {r['vs_alone']:.2f} | "
-            f"{r['fps_per_client']:.1f} | {r['fps_per_client'] / r['steps_per_s']:.2f} | "
-            f"{r['p50_ms']:.1f} | {r['p99_ms']:.1f} | {bound:.0f} | {r['samples']} | "
-            f"{r['dropped']} | {r['step_p50_ms']:.0f} / {r['step_p99_ms']:.0f} / "
-            f"{r['step_max_ms']:.0f} | {r['beyond_p99_ms']:.1f} | "
-            f"{r['server_cpu']:.2f} / {r['engine_cpu']:.2f} / "
-            f"{r['client_cpu']:.2f} | {100 * r['engine_wait']:.0f} % | "
-            f"{100 * r['steal']:.0f} % | {verdict} |"
-        )
-    return lines + [""]
-
-
-def write_report(
-    path: Path,
-    meta: dict[str, Any],
-    tables: list[tuple[str, float, list[dict[str, Any]]]],
-    sizes: list[dict[str, Any]],
-    slow: dict[str, Any],
-) -> None:
-    lines = [
-        "# Service benchmark",
-        "",
-        f"`python benchmarks/service.py {meta['argv']}` — the real engine, fields "
-        f"{', '.join(FIELDS)} ({DTYPE} {REGION}), loopback, {meta['seconds']} s per row, "
-        f"{os.cpu_count()} cores shared by the server, the clients and other jobs (load average "
-        f"{meta['load']}).",
-        "",
-        placement_text(meta["engine_cpus"], meta["server_cpus"]),
-        "",
-        "## Streaming: N clients on one session, as fast as the engine steps",
-        "",
-        "One client sends `run` at 1000 steps/s (more than the engine can do: the session steps "
-        "as fast as it goes); all subscribe to the same fields. *Engine alone* is the same "
-        "server stepping a session over REST (requests of about a second of steps) with no "
-        "client streaming. Each "
-        "row is the median of the repetitions; the configurations run interleaved (alone, 1, 4, "
-        "16, alone, ...) on fresh sessions, and *vs alone* is the median of each run's ratio to "
-        "the alone run just before it, so that the shared machine's drifting load cancels. "
-        f"Clients: up to {CLIENTS_PER_PROC} per forked client process (`service_client.py`, "
-        "`--clients-per-proc`), each a WebSocket "
-        "client that reads every byte of every frame off its socket into one buffer and keeps "
-        "only the message's header (step, `control_id`, report, `dropped`; the arrays come "
-        "last and are skipped unread), so that the latency is the service's and not that of "
-        "a Python client decoding 16 x 1.2 MB per step in one process (the client before this "
-        "one, `service_trace.py` replays it). "
-        "CPU: cores used during the row by the server process, by its engine processes and by "
-        "the benchmark's client processes (which share the cores with them; placed, the "
-        "server's). Latency: from "
-        "sending an electrode control message to the first frame whose `control_id` shows it "
-        "applied (the ack gives the control's id; the frame may come before the ack); every "
-        "client sends one every 0.25 s, right after a frame arrives, which is the worst phase: "
-        "the step in progress has just begun. Frames dropped: coalesced for clients that fell "
-        "behind (summed). Engine step: the engine's own wall time per step (the frames' "
-        "reports); *p99 beyond its two steps*: each control's latency less the wall times of the "
-        "step that showed it and the step before (the one it waited for), i.e. what the service "
-        "adds. Targets: frames/s per client >= 0.9 x steps/s, steps/s with 16 "
-        "clients >= 0.9 x alone, p99 <= 2 step times + 20 ms, step time = 1 / steps/s of the "
-        "row (a control waits for the step in progress, then its own step).",
-        "",
-        "Scene: the built-in `default` (50 W) with only its electric and thermal effects, on "
-        "the grids below (`default`: the scene's own graded grid, 1 mm under the electrode, "
-        f"{DEFAULT_LABEL.split(' ')[0]}): a steady cost per step, so that rows compare "
-        "like with like (with vaporization and mechanics a step costs ~100x more once the "
-        "tissue boils, which happens within a row). Frames carry temperature and displacement "
-        f"({DTYPE} {REGION}).",
-        "",
-    ]
-    for grid, alone, fan in tables:
-        lines += fan_table(grid, alone, fan)
-    lines += [
-        "How: each loaded session's engine runs in a process of its own "
-        "(`engine_process.py`, forked by a forkserver that imported the engine once); a worker "
-        "thread of the server keeps two step requests in flight, so the engine starts the next "
-        "step while the server journals the last one, and electrode controls go to the engine "
-        "at once, which applies them before its next step (ahead of a queued step) and answers "
-        "in the order it ran them, the order the server journals them in. The engine process "
-        "takes the step and builds and msgpack-encodes "
-        "the frame once per distinct subscription; the server journals the step "
-        "(`journal.py`) before it hands the bytes to the clients, and the event loop only "
-        "prefixes each client's `dropped` counter and writes the bytes (no per-message "
-        "compression: float fields barely compress and deflating a frame per client cost more "
-        "than the step). So the sockets' writes no longer take GIL time from the engine, and "
-        "with BLAS on one thread (`DIATHERMY_BLAS_THREADS`, default 1, as `diathermy serve` "
-        "sets) the engine takes one core and leaves the other to the event loop, the kernel's "
-        "copies and the clients; with `DIATHERMY_ENGINE_CPUS` (`cpus.py`) the scheduler no "
-        "longer decides that: the engine processes are pinned to their CPUs and the server "
-        "(with the clients, here) to the others, so the fan-out never takes the engine's core. "
-        "The frame of a step is written first to the clients whose last "
-        "electrode control it is the first to show (`hub.py`), and the senders are woken one "
-        "per turn of the event loop, so that a control that arrives while a frame goes out to "
-        "16 clients is read after one write, not sixteen.",
-        "",
-        "CPU column: *server* is the server process (event loop, HTTP, journal), *engine* its "
-        "engine processes, *clients* the benchmark's client processes. Every step moves 16 x the "
-        "frame over loopback (150 kB on 17x17x33, 0.6 MB on the default grid, 1.2 MB on "
-        "33x33x65): the server's writes, "
-        "the kernel's copies and the clients' reads take that much CPU besides the engine's "
-        "(on the server's CPUs when placed). *Engine waits for a CPU*: the share of the "
-        "row's wall time the engine process was runnable but not running (its run-queue delay, "
-        "`/proc/<pid>/schedstat`): time the other jobs, the server and the clients took from "
-        "it (placed, only other jobs can). *Host steal*: the share of all CPUs' time during the "
-        "row that the hypervisor gave to other virtual machines (`/proc/stat`); the guest does "
-        "not see it as waiting, but a step that loses its CPU for a while is that much slower, "
-        "so a row with more than a few per cent of it measures the host, not the service "
-        f"(the whole run: {meta['steal']:.1f} %).",
-        "",
-        *trace_section(),
-        "## Bytes per frame",
-        "",
-        "A 2 x 1 x 1 cm block under 200 W, stepped until it cuts.",
-        "",
-        "| region | dtype | bytes | surface vertices |",
-        "|---|---|---:|---:|",
-    ]
-    for r in sizes:
-        lines.append(
-            f"| {r['region']} | {r['dtype']} | {r['bytes']} | "
-            f"{'' if r['surface_vertices'] is None else r['surface_vertices']} |"
-        )
-    v32 = next(r["bytes"] for r in sizes if r["region"] == "volume" and r["dtype"] == "float32")
-    v16 = next(r["bytes"] for r in sizes if r["region"] == "volume" and r["dtype"] == "float16")
-    lines += ["", f"float16 / float32 volume: {v16 / v32:.2f}.", ""]
-    lines += [
-        "## Server memory under a slow client",
-        "",
-        f"A raw-socket client subscribes to volume frames on grid {slow['grid']}, starts the "
-        f"run and reads nothing for {slow['seconds']} s.",
-        "",
-        "| steps taken | frames dropped (coalesced) | server RSS before MiB | "
-        "server RSS peak MiB | growth MiB | frame bytes |",
-        "|---:|---:|---:|---:|---:|---:|",
-        f"| {slow['steps']} | {slow['dropped']} | {slow['rss_before_mib']:.0f} | "
-        f"{slow['rss_peak_mib']:.0f} | {slow['rss_peak_mib'] - slow['rss_before_mib']:.0f} | "
-        f"{slow['frame_bytes']} |",
-        "",
-        f"Without coalescing the server would have queued about "
-        f"{slow['steps'] * slow['frame_bytes'] / 2**20:.0f} MiB for this client.",
-        "",
-    ]
-    path.write_text("\n".join(lines), encoding="utf-8")
-
-
 def bench_engine_cpus(text: str) -> list[int]:
     """``--engine-cpus``: 'auto' is the last CPU this process may use when it may use 2 or more."""
     if text == "none":
@@ -760,33 +532,6 @@ def bench_engine_cpus(text: str) -> list[int]:
         cpus = sorted(os.sched_getaffinity(0))
         return cpus[-1:] if len(cpus) >= 2 else []
     return parse_cpus(text)
-
-
-def placement_text(engine_cpus: list[int], server_cpus: list[int]) -> str:
-    """The results' sentence on CPU placement."""
-    if not engine_cpus:
-        return (
-            "CPU placement: none (`--engine-cpus none`): the server, its engine processes and "
-            "the clients run wherever the scheduler puts them."
-        )
-    rest = format_cpus(server_cpus)
-    return (
-        f"CPU placement: `DIATHERMY_ENGINE_CPUS={format_cpus(engine_cpus)}` (`--engine-cpus`): "
-        f"the engine processes run on CPU {format_cpus(engine_cpus)}, the server process (event "
-        f"loop, worker threads, journal, the socket writes and the kernel's copies they make) on "
-        f"CPU {rest}, and the benchmark pins its own client processes to CPU {rest} too: a real "
-        "deployment's clients run on other machines, and here they would otherwise take the "
-        "engine's core."
-    )
-
-
-def trace_section() -> list[str]:
-    """The latency breakdown of ``service_trace.py`` (its last results), headings demoted."""
-    path = ROOT / "benchmarks" / "results" / "service_trace.md"
-    if not path.exists():
-        return []
-    text = path.read_text(encoding="utf-8").strip().splitlines()
-    return [("#" + ln if ln.startswith("#") else ln) for ln in text] + [""]
 
 
 def main() -> None:
@@ -859,7 +604,8 @@ def main() -> None:
             for grid_text, secs in zip(grids, seconds, strict=True):
                 grid = parse_grid(grid_text)
                 alone, rows = grid_rows(server, grid, clients, secs, args.reps)
-                tables.append((grid_text, alone, rows))
+                label = DEFAULT_LABEL if grid_text == "default" else grid_text
+                tables.append((label, alone, rows))
             first = parse_grid(args.grids.split(",")[0])
             sid = server.session(first, QUICK_CUT)
             server.step_until_cut(sid)
@@ -874,6 +620,11 @@ def main() -> None:
         finally:
             server.stop()
     meta = {
+        "fields": FIELDS,
+        "dtype": DTYPE,
+        "region": REGION,
+        "clients_per_proc": CLIENTS_PER_PROC,
+        "default_grid": DEFAULT_LABEL.split(" ")[0],
         "engine_cpus": engine_cpus,
         "server_cpus": sorted(os.sched_getaffinity(0)),  # this script's, after pinning
         "seconds": args.seconds,
