@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import resource
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -54,7 +53,7 @@ class RunRecord:
 def run_variant(scene_json: str, variant: Variant, steps: int, key: str, fields_path: str) -> str:
     """Entry point of the child process: run, write W and u per step, return the record as JSON."""
     from diathermy.engine.simulation import Simulation
-    from diathermy.runtime import configure_threads
+    from diathermy.runtime import configure_threads, own_peak_rss_mib
 
     configure_threads()
     scene = variant.apply(Scene.model_validate_json(scene_json), steps)
@@ -95,7 +94,7 @@ def run_variant(scene_json: str, variant: Variant, steps: int, key: str, fields_
                 U[i] = sim.state["displacement"]
     except Exception as err:  # recorded, so one failing variant does not sink the report
         rec.error = f"{type(err).__name__}: {err}"
-    rec.peak_rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    rec.peak_rss_mb = own_peak_rss_mib()
     return rec.to_json()
 
 
