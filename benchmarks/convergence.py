@@ -38,7 +38,6 @@ import argparse  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
 import multiprocessing as mp  # noqa: E402
-import resource  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -62,6 +61,7 @@ from convergence_report import (  # noqa: E402
 from diathermy.engine.simulation import Simulation  # noqa: E402
 from diathermy.physics.dissection import cut_driver  # noqa: E402
 from diathermy.physics.topology import contact_height  # noqa: E402
+from diathermy.runtime import own_peak_rss_mib  # noqa: E402
 from diathermy.scene import Scene, builtin_scene  # noqa: E402
 
 PROFILE_TIMES_S = (3.0, 6.0, 12.0)
@@ -243,7 +243,7 @@ def run(
         shape=np.asarray(sim.grid.shape),
         n_nodes=sim.grid.n_nodes,
         build_s=build_s,
-        max_rss_mib=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        max_rss_mib=own_peak_rss_mib(),
         target_s=seconds,
         length_mm=length_mm,
         contact=contact,
@@ -354,7 +354,7 @@ def _main_job(uniform: bool, steps: int) -> dict[str, float]:
         "first_cut_s": cut_at,
         "cut_m3": r.cut_volume_m3,
         "depth_m": r.crater_depth_m,
-        "max_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "max_rss_mib": own_peak_rss_mib(),
     }
 
 
