@@ -18,11 +18,8 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
-import multiprocessing
 import os
-import socket
 import statistics
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -31,10 +28,9 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "server"), str(ROOT)]
 
-import httpx  # noqa: E402
 from websockets.asyncio.client import connect  # noqa: E402
 
-from benchmarks.service_client import RawStream  # noqa: E402
+from benchmarks import service_stream as stream  # noqa: E402
 from benchmarks.service_procs import (  # noqa: E402
     children_cpu_s,
     cpu_ticks,
@@ -43,284 +39,32 @@ from benchmarks.service_procs import (  # noqa: E402
     steal_share,
     tree_cpu_s,
 )
+from benchmarks.service_server import (  # noqa: E402
+    DEFAULT_LABEL,
+    TOKEN,
+    Server,
+    serve_child,
+)
+from benchmarks.service_stream import (  # noqa: E402
+    FIELDS,
+    client_procs,
+    control_latencies,
+    fan_out,
+    set_clients_per_proc,
+)
 from benchmarks.service_tables import write_report  # noqa: E402
-from diathermy.scene.builtin import builtin_scene  # noqa: E402
 from diathermy.service.cpus import format_cpus, parse_cpus  # noqa: E402
 from diathermy.service.encoding import unpack  # noqa: E402
 
-TOKEN = "bench-token"
 QUICK_CUT = {
     "name": "quick-cut",
     "block_m": [0.02, 0.01, 0.01],
     "electrodes": [{"position_m": [0.01, 0.005], "power_w": 200.0}],
 }
-FIELDS = ["temperature", "displacement"]
-DTYPE = "float32"  # the stream clients' subscription (--dtype); forked clients inherit it
-REGION = "volume"  # and its region (--region)
-CLIENTS_PER_PROC = 4
-FULL_DECODE = False  # service_trace.py --full-decode: the old client
 STEADY = {"name": "default-electrothermal", "effects": ["electric", "thermal"]}
 """The built-in default scene (50 W) without vaporization and mechanics: a steady step cost, so
 that rows compare like with like (with them, steps slow ~100x once the tissue boils)."""
-DEFAULT_RESOLUTION = builtin_scene("default").resolution.model_dump(mode="json")  # type: ignore[union-attr]
-"""The default scene's graded grid (``--grids default``)."""
-DEFAULT_LABEL = (
-    "x".join(map(str, builtin_scene("default").node_shape)) + " (the default scene's graded grid)"
-)
-"""The heading of the default grid's table."""
-
-
-def serve_child(args: argparse.Namespace) -> None:
-    """The child process: the app with the real engine under uvicorn."""
-    import uvicorn
-
-    from diathermy.runtime import configure_threads
-    from diathermy.service import Settings, create_app
-    from diathermy.service.cpus import place_server
-    from diathermy.service.jsonlog import configure_logging
-
-    configure_threads()  # as `diathermy serve` does: one BLAS thread per engine
-
-    settings = Settings(
-        port=args.port,
-        data_dir=Path(args.data_dir),
-        tokens=[TOKEN],
-        max_stream_rate_hz=1000.0,
-        max_sessions_per_token=64,
-        autosave_interval_s=3600,
-        log_level="WARNING",
-    )
-    configure_logging("WARNING")
-    place_server(settings.engine_cpus)  # as `diathermy serve` does (DIATHERMY_ENGINE_CPUS)
-    app = create_app(settings)
-    uvicorn.run(
-        app,
-        host="127.0.0.1",
-        port=args.port,
-        ws="websockets-sansio",
-        ws_per_message_deflate=False,
-        log_config=None,
-        access_log=False,
-        ws_max_size=settings.max_message_bytes,
-    )
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-class Server:
-    def __init__(
-        self, data_dir: Path, script: Path | None = None, env: dict[str, str] | None = None
-    ) -> None:
-        self.port = free_port()
-        self.url = f"http://127.0.0.1:{self.port}"
-        self.ws = f"ws://127.0.0.1:{self.port}"
-        self.proc = subprocess.Popen(
-            [
-                sys.executable,
-                str(script or __file__),
-                "serve-child",
-                "--port",
-                str(self.port),
-                "--data-dir",
-                str(data_dir),
-            ],
-            env=env,
-        )
-        self.wait_ready(timeout_s=60.0)
-        self.http = httpx.Client(
-            base_url=self.url, headers={"Authorization": f"Bearer {TOKEN}"}, timeout=120
-        )
-
-    def wait_ready(self, timeout_s: float) -> None:
-        """Poll ``/readyz``; raise at once if the server exits, or after ``timeout_s``."""
-        deadline = time.monotonic() + timeout_s
-        while True:
-            code = self.proc.poll()
-            if code is not None:
-                raise RuntimeError(f"the benchmark server exited with code {code} before ready")
-            try:
-                if httpx.get(self.url + "/readyz", timeout=5).status_code == 200:
-                    return
-            except httpx.TransportError:
-                pass
-            if time.monotonic() > deadline:
-                self.stop()
-                raise RuntimeError(f"the benchmark server was not ready after {timeout_s:.0f} s")
-            time.sleep(0.1)
-
-    def session(self, grid: list[int] | None, scene: dict[str, Any] | None = None) -> str:
-        """A new session on ``grid`` (None: the default scene's own graded grid)."""
-        if grid is None:
-            own = {"resolution": DEFAULT_RESOLUTION}
-            body: dict[str, Any] = {"scene": {**(scene or {}), **own}}
-        else:
-            body = (
-                {"scene": {**scene, "grid": grid}}
-                if scene
-                else {"builtin": "default", "grid": grid}
-            )
-        r = self.http.post("/v1/sessions", json=body)
-        r.raise_for_status()
-        return str(r.json()["id"])
-
-    def step_until_cut(self, sid: str, max_steps: int = 40) -> int:
-        for _ in range(max_steps):
-            rep = self.http.post(f"/v1/sessions/{sid}/step").json()["reports"][-1]
-            if rep["cut_volume_m3"]:
-                return int(rep["step"])
-        raise RuntimeError("no cut")
-
-    def stop(self) -> None:
-        self.proc.terminate()
-        try:
-            self.proc.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
-
-
-def control_latencies(
-    sent: dict[int, float], acked: dict[int, int], frames: list[tuple[float, int, int]]
-) -> list[tuple[float, int]]:
-    """(seconds, step) from sending each control to the first frame received after it whose
-    ``control_id`` is at least the control's (ids grow in the order the engine applies them,
-    so that frame is the first to show it applied), and that frame's step. ``sent``: tag ->
-    send time; ``acked``: tag -> control id; ``frames``: (receive time, control_id, step) in
-    order."""
-    out = []
-    for tag, t_sent in sent.items():
-        cid = acked.get(tag)
-        if cid is None:
-            continue
-        got = next(((t, s) for t, c, s in frames if t > t_sent and c >= cid), None)
-        if got is not None:
-            out.append((got[0] - t_sent, got[1]))
-    return out
-
-
-class FullClient:
-    """The old client (``service_trace.py --full-decode``): the ``websockets`` library, every
-    message decoded whole."""
-
-    def __init__(self, ws: Any) -> None:
-        self.ws = ws
-
-    @classmethod
-    async def open(cls, url: str) -> FullClient:
-        headers = {"Authorization": f"Bearer {TOKEN}"}
-        return cls(await connect(url, additional_headers=headers, max_size=None))
-
-    async def recv(self, timeout_s: float) -> tuple[float, dict[str, Any]]:
-        raw = await asyncio.wait_for(self.ws.recv(), timeout=timeout_s)
-        t = time.monotonic()
-        return t, dict(unpack(raw))
-
-    def send_text(self, text: str) -> None:
-        asyncio.ensure_future(self.ws.send(text))
-
-    def close(self) -> None:
-        asyncio.ensure_future(self.ws.close())
-
-
-async def open_client(url: str) -> Any:
-    if FULL_DECODE:
-        return await FullClient.open(url)
-    host_port, path = url.removeprefix("ws://").split("/", 1)
-    host, port = host_port.split(":")
-    return await RawStream.open(host, int(port), "/" + path, TOKEN)
-
-
-async def stream_client(
-    url: str,
-    *,
-    index: int,
-    rate_hz: float | None,
-    t_start: float,
-    seconds: float,
-    out: dict[str, Any],
-) -> None:
-    """Subscribe, (if ``rate_hz``) start the run, send an electrode control every 0.25 s from
-    ``t_start`` (monotonic clock) for ``seconds``, and time the frames that show them applied."""
-    ws = await open_client(url)
-    try:
-        await ws.recv(30.0)  # hello
-        sub = {"type": "subscribe", "fields": FIELDS, "dtype": DTYPE, "region": REGION}
-        ws.send_text(json.dumps(sub))
-        if rate_hz is not None:
-            ws.send_text(json.dumps({"type": "run", "rate_hz": rate_hz}))
-        frames: list[tuple[float, int, int]] = []  # (receive time, control_id, step) of each
-        counted: list[tuple[float, int]] = []  # (receive time, step) from t_start
-        sent: dict[int, float] = {}  # tag -> send time
-        acked: dict[int, int] = {}  # tag -> control id
-        walls: dict[int, float] = {}  # step -> the engine's wall time for it (frame report)
-        tag = index * 1_000_000  # unique across clients (the trace joins on it)
-        t_end = t_start + seconds
-        next_control = t_start
-        dropped = 0
-        while True:
-            now = time.monotonic()
-            if now >= t_end:
-                break
-            if now >= next_control:
-                tag += 1
-                sent[tag] = now
-                power = 50.0 if tag % 2 else 49.0
-                ws.send_text(json.dumps({"type": "electrode", "power_w": power, "tag": tag}))
-                next_control = now + 0.25
-            try:
-                t, msg = await ws.recv(0.05)  # so a control goes out just after a frame
-            except TimeoutError:
-                continue
-            if msg["type"] == "ack" and msg.get("tag") in sent:
-                acked[msg["tag"]] = msg["control_id"]
-            elif msg["type"] == "frame":
-                frames.append((t, msg["control_id"], msg["step"]))
-                if msg.get("report"):
-                    walls[msg["step"]] = float(msg["report"]["wall_s"])
-                if t >= t_start:
-                    counted.append((t, msg["step"]))
-                    dropped = msg["dropped"]
-        if rate_hz is not None:
-            ws.send_text(json.dumps({"type": "pause"}))
-            await asyncio.sleep(0.05)
-    finally:
-        ws.close()
-    span = counted[-1][0] - counted[0][0] if len(counted) > 1 else float("nan")
-    out["fps"] = (len(counted) - 1) / span
-    out["steps_per_s"] = (counted[-1][1] - counted[0][1]) / span
-    out["latencies"] = control_latencies(sent, acked, frames)
-    out["dropped"] = dropped
-    out["sent"], out["acked"], out["frames"], out["walls"] = sent, acked, frames, walls
-
-
-def client_process(
-    url: str, indices: list[int], rate_hz: float, t_start: float, seconds: float, conn: Any
-) -> None:
-    """One client process: the stream clients ``indices`` (client 0 starts the run)."""
-    outs: list[dict[str, Any]] = [{} for _ in indices]
-
-    async def clients() -> None:
-        await asyncio.gather(
-            *[
-                stream_client(
-                    url,
-                    index=i,
-                    rate_hz=rate_hz if i == 0 else None,
-                    t_start=t_start,
-                    seconds=seconds,
-                    out=o,
-                )
-                for i, o in zip(indices, outs, strict=True)
-            ]
-        )
-
-    asyncio.run(clients())
-    conn.send(outs)
-    conn.close()
+__all__ = ["Server", "client_procs", "control_latencies", "fan_out", "serve_child"]
 
 
 def parse_grid(text: str) -> list[int] | None:
@@ -395,72 +139,6 @@ def grid_rows(
         row["alone_wait"] = statistics.median(alone_wait)
         rows.append(row)
     return statistics.median(alone), rows
-
-
-def fan_out(server: Server, sid: str, n: int, seconds: float, rate_hz: float) -> dict[str, Any]:
-    """``n`` clients in ``client_procs(n)`` forked processes (so that one Python process
-    decoding every stream is not what the latency measures); their results and CPU seconds."""
-    url = f"{server.ws}/v1/sessions/{sid}/stream"
-    procs = client_procs(n)
-    ctx = multiprocessing.get_context("fork")
-    t_start = time.monotonic() + 1.0 + 0.05 * n  # all connected and subscribed by then
-    running = []
-    for p in range(procs):
-        ours, theirs = ctx.Pipe(duplex=False)
-        indices = list(range(p, n, procs))
-        proc = ctx.Process(
-            target=client_process, args=(url, indices, rate_hz, t_start, seconds, theirs)
-        )
-        proc.start()
-        theirs.close()
-        running.append((proc, ours))
-    outs: list[dict[str, Any]] = []
-    for proc, ours in running:
-        outs += ours.recv()
-        proc.join()
-        if proc.exitcode:
-            raise RuntimeError(f"a benchmark client process exited with code {proc.exitcode}")
-    lat = sorted(x for o in outs for x, _ in o["latencies"])
-    q = statistics.quantiles(lat, n=100) if len(lat) >= 2 else [float("nan")] * 99
-    by_step = {k: v for o in outs for k, v in o["walls"].items()}
-    walls = sorted(by_step.values())
-    qw = statistics.quantiles(walls, n=100) if len(walls) >= 2 else [float("nan")] * 99
-    beyond = [  # beyond the engine's own time for the frame's step and the one before it
-        x - by_step[s] - by_step[s - 1]
-        for o in outs
-        for x, s in o["latencies"]
-        if s in by_step and s - 1 in by_step
-    ]
-    qb = statistics.quantiles(beyond, n=100) if len(beyond) >= 2 else [float("nan")] * 99
-    steps_per_s = statistics.median(o["steps_per_s"] for o in outs)
-    return {
-        "clients": n,
-        "procs": procs,
-        "rate_hz": rate_hz,
-        "steps_per_s": steps_per_s,
-        "fps_per_client": statistics.median(o["fps"] for o in outs),
-        "fps_total": sum(o["fps"] for o in outs),
-        "p50_ms": 1e3 * q[49],
-        "p99_ms": 1e3 * q[98],
-        "samples": len(lat),
-        "dropped": sum(o["dropped"] for o in outs),
-        "step_p50_ms": 1e3 * qw[49],
-        "step_p99_ms": 1e3 * qw[98],
-        "step_max_ms": 1e3 * walls[-1] if walls else float("nan"),
-        "beyond_p99_ms": 1e3 * qb[98],
-        "outs": outs,
-    }
-
-
-def set_clients_per_proc(n: int) -> None:
-    """How many stream clients share one forked client process (at least 1)."""
-    global CLIENTS_PER_PROC
-    CLIENTS_PER_PROC = max(1, n)
-
-
-def client_procs(n: int) -> int:
-    """Client processes for ``n`` clients: up to ``CLIENTS_PER_PROC`` clients each."""
-    return max(1, -(-n // CLIENTS_PER_PROC))
 
 
 async def frame_sizes(server: Server, sid: str) -> list[dict[str, Any]]:
@@ -552,7 +230,7 @@ def main() -> None:
     p.add_argument(
         "--clients-per-proc",
         type=int,
-        default=CLIENTS_PER_PROC,
+        default=stream.CLIENTS_PER_PROC,
         help="stream clients per forked client process (the clients share the server's CPUs "
         "when placed: with small frames one event loop for all of them costs less than several; "
         "with large ones several spread the reading)",
@@ -581,8 +259,7 @@ def main() -> None:
     if args.cmd == "serve-child":
         serve_child(args)
         return
-    global DTYPE, REGION
-    DTYPE, REGION = args.dtype, args.region
+    stream.DTYPE, stream.REGION = args.dtype, args.region
     import tempfile
 
     slow_grid = [int(x) for x in args.slow_grid.split("x")]
@@ -621,9 +298,9 @@ def main() -> None:
             server.stop()
     meta = {
         "fields": FIELDS,
-        "dtype": DTYPE,
-        "region": REGION,
-        "clients_per_proc": CLIENTS_PER_PROC,
+        "dtype": stream.DTYPE,
+        "region": stream.REGION,
+        "clients_per_proc": stream.CLIENTS_PER_PROC,
         "default_grid": DEFAULT_LABEL.split(" ")[0],
         "engine_cpus": engine_cpus,
         "server_cpus": sorted(os.sched_getaffinity(0)),  # this script's, after pinning

@@ -377,7 +377,7 @@ def run_variant(
     """One server with the hooks; every grid and client count; the breakdown of each run."""
     bench = svc()
     v = VARIANTS[name]
-    bench.CLIENTS_PER_PROC, bench.FULL_DECODE = v["per_proc"], v["full_decode"]
+    bench.stream.CLIENTS_PER_PROC, bench.stream.FULL_DECODE = v["per_proc"], v["full_decode"]
     out: dict[str, list[dict[str, Any]]] = {}
     with tempfile.TemporaryDirectory() as tmp:
         trace_dir = Path(tmp) / "trace"
