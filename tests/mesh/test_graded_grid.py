@@ -130,6 +130,10 @@ def test_max_cell_caps_the_far_field():
         ({"max_cell_m": 1e-4}, "largest cell"),
         ({"top_cell_m": 2e-3}, "end cell .* must not exceed"),
         ({"top_cell_m": -1e-4}, "end cell"),
+        ({"bottom_tier_m": (0.02, 5e-4)}, "tier cell .* must lie between"),
+        ({"bottom_tier_m": (0.02, 1.0), "max_cell_m": 5e-3}, "tier cell .* must lie between"),
+        ({"bottom_tier_m": (-0.02, 2e-3)}, "tier length"),
+        ({"bottom_tier_m": (0.02, math.nan)}, "tier cell"),
         ({"region_lo_m": (0.0, 0.0)}, "region_lo_m"),
         ({"size_m": (0.2, -0.1, 0.1)}, "block size"),
         ({"origin_m": (0.0, math.inf, 0.0)}, "origin"),
@@ -187,6 +191,34 @@ def test_graded_axis_properties_or_clear_error(lo, length, a, width, fine, growt
     assert d.min() <= fine * length * (1 + 1e-9)
     # adjacent cells differ by at most the growth ratio (a factor 2 more where a short gap
     # gets equal cells shorter than the fine ones)
+    r = d[1:] / d[:-1]
+    assert np.all(r <= 2 * growth * (1 + 1e-6)) and np.all(r >= 1 / (2 * growth * (1 + 1e-6)))
+
+
+@given(
+    gap=st.floats(0.0, 0.5),
+    first=st.floats(1e-4, 1e-2),
+    length=st.floats(1e-4, 0.5),
+    ratio=st.floats(1.0, 10.0),
+    growth=st.floats(1.0, 2.0),
+)
+def test_a_lower_tier_bounds_its_cells_and_keeps_the_growth(gap, first, length, ratio, growth):
+    """Below the region the cells fill the gap exactly, stay at most the tier's cell over the
+    tier's length, and grow by at most the growth ratio (twice it where a gap too short for
+    growth gets equal cells)."""
+    lo, a = 0.0, gap
+    try:
+        x = graded_axis(
+            lo, a + 0.01, (a, a + 0.01), first, growth, 0.05, lo_tier=(length, first * ratio)
+        )
+    except MeshError:
+        return
+    d = np.diff(x)
+    assert x[0] == lo and np.all(d > 0)
+    below = x[1:] <= a + 1e-12
+    in_tier = below & (x[1:] >= a - length + first * ratio)
+    if in_tier.any():
+        assert d[in_tier].max() <= first * ratio * (1 + 1e-9)
     r = d[1:] / d[:-1]
     assert np.all(r <= 2 * growth * (1 + 1e-6)) and np.all(r >= 1 / (2 * growth * (1 + 1e-6)))
 

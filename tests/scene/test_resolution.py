@@ -117,6 +117,8 @@ BAD = {
     "fine_z_m": st.one_of(
         st.floats(max_value=1.9e-5), st.floats(min_value=0.051), st.just(math.inf)
     ),
+    "deep_m": st.one_of(st.floats(max_value=0.0), st.floats(min_value=1.001), st.just(math.nan)),
+    "deep_z_m": st.one_of(st.floats(max_value=1.9e-5), st.floats(min_value=0.0501)),
 }
 
 
@@ -148,6 +150,54 @@ def test_a_cell_height_of_its_own_refines_z_alone():
         Resolution(fine_m=1e-3, fine_z_m=0.5e-3, surface_m=0.6e-3)
     with pytest.raises(ValidationError, match="max_cell_m .* must be at least fine_z_m"):
         Resolution(fine_m=1e-3, fine_z_m=3e-3, max_cell_m=2e-3)
+
+
+def test_a_deep_tier_keeps_the_cells_bounded_below_the_working_region():
+    """``deep_m`` keeps the cells under the working region at most ``deep_z_m`` tall down to that
+    depth, grading up to it by at most the growth ratio; the region itself, x and y are as
+    without it, and the step reports' region (``Scene.working_region``) reaches down to it."""
+    plain = with_resolution("fixed-electrode")
+    deep = with_resolution("fixed-electrode", deep_m=40e-3)
+    assert deep.resolution is not None and deep.resolution.deep_cell_m == pytest.approx(0.8e-3)
+    gp, gd = plain.node_grid(), deep.node_grid()
+    assert all(np.array_equal(a, b) for a, b in zip(gd.axes()[:2], gp.axes()[:2], strict=True))
+    top = deep.block_m[2]
+    zp, zd = gp.axes()[2], gd.axes()[2]
+    region_d, region_p = zd[zd >= top - 12e-3 - 1e-12], zp[zp >= top - 12e-3 - 1e-12]
+    assert region_d.shape == region_p.shape and np.allclose(region_d, region_p, rtol=0, atol=1e-12)
+    dz = np.diff(zd)
+    tier = zd[:-1] >= top - 40e-3 - 1e-12
+    assert dz[tier].max() <= 0.8e-3 * (1 + 1e-9)
+    assert dz[~tier].min() >= dz[tier].max() * (1 - 1e-9)  # and grow on below it
+    assert np.all(np.maximum(dz[1:] / dz[:-1], dz[:-1] / dz[1:]) <= 1.25 + 1e-9)
+    assert gd.nz > gp.nz + 28 - 10  # 28 mm more at <= 0.8 mm, against the cells it replaces
+    (lo, hi), (lo0, hi0) = deep.working_region(), plain.working_region()
+    assert lo[2] == pytest.approx(top - 40e-3) and lo[:2] == lo0[:2] and hi == hi0
+    assert Scene.model_validate_json(deep.model_dump_json()) == deep
+    # a tier of its own height; one below the block's bottom ends there
+    tall = with_resolution("fixed-electrode", deep_m=40e-3, deep_z_m=2e-3)
+    dz = np.diff(tall.node_grid().axes()[2])
+    assert dz[tall.node_grid().axes()[2][:-1] >= top - 40e-3 - 1e-12].max() <= 2e-3 * (1 + 1e-9)
+    whole = with_resolution("fixed-electrode", fine_m=1e-3, deep_m=0.5)
+    assert np.diff(whole.node_grid().axes()[2]).max() <= 2e-3 * (1 + 1e-9)
+    assert whole.working_region()[0][2] == 0.0
+
+
+def test_a_deep_tier_above_the_region_or_of_the_wrong_height_is_refused():
+    with pytest.raises(ValidationError, match=r"deep_m .* must exceed depth_m"):
+        Resolution(deep_m=10e-3)
+    with pytest.raises(ValidationError, match=r"deep_z_m .* must lie between fine_m"):
+        Resolution(deep_m=40e-3, deep_z_m=0.2e-3)
+    with pytest.raises(ValidationError, match=r"deep_z_m .* must lie between fine_z_m"):
+        Resolution(fine_z_m=0.8e-3, deep_m=40e-3, deep_z_m=0.5e-3)
+    with pytest.raises(ValidationError, match=r"deep_z_m .* and max_cell_m"):
+        Resolution(deep_m=40e-3, max_cell_m=2e-3, deep_z_m=3e-3)
+    with pytest.raises(ValidationError, match=r"resolution: deep_m .* must reach below"):
+        with_resolution(
+            "fixed-electrode",
+            deep_m=5e-3,
+            region_m=((0.09, 0.04, 0.08), (0.11, 0.06, 0.1)),
+        )
 
 
 def test_inconsistent_or_huge_requests_are_refused():

@@ -53,7 +53,8 @@ class RunSummary:
             )
             lines.append(
                 f"warning: {self.scene}: {parts} left the grid's fine working region, so results "
-                "there are on coarser cells; deepen resolution.depth_m or widen resolution.region_m"
+                "there are on coarser cells; deepen resolution.depth_m (or add a deep tier, "
+                "resolution.deep_m) or widen resolution.region_m"
             )
         for name, (t, why) in self.left_out.items():
             lines.append(

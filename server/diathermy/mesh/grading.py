@@ -37,7 +37,8 @@ def _outer_cells(gap: float, first: float, growth: float, max_cell: float) -> np
         return np.zeros(0)
 
     def cells(q: float, m: int) -> np.ndarray:
-        return np.minimum(first * q ** np.arange(1, m + 1, dtype=float), max(max_cell, first))
+        with np.errstate(over="ignore"):  # q^m past the float range is capped anyway
+            return np.minimum(first * q ** np.arange(1, m + 1, dtype=float), max(max_cell, first))
 
     # fewest cells that reach the gap at the largest allowed growth
     total, m, c = 0.0, 0, first
@@ -61,6 +62,36 @@ def _outer_cells(gap: float, first: float, growth: float, max_cell: float) -> np
             hi = mid
     out = cells(hi, m)
     return out * (gap / out.sum())
+
+
+def _lower_cells(
+    gap: float, first: float, growth: float, max_cell: float, tier: tuple[float, float] | None
+) -> np.ndarray:
+    """Cell lengths (m,) filling ``gap`` outward from a cell of length ``first``: over at least
+    the tier's length (whole cells growing by ``growth`` up to its cell), then on to
+    ``max_cell``; a tier that reaches within one of its cells of the gap's end takes it all."""
+    if tier is None:
+        return _outer_cells(gap, first, growth, max_cell)
+    length = _check_length("tier length", tier[0])
+    cell = _check_length("tier cell", tier[1])
+    if cell < first * (1.0 - 1e-12) or cell > max_cell:
+        raise MeshError(
+            f"tier cell ({cell} m) must lie between the fine spacing {first} m and the largest "
+            f"cell {max_cell} m"
+        )
+    near: list[float] = []
+    c, total = first, 0.0
+    while total < length * (1.0 - 1e-12) and total < gap:
+        c = min(c * growth, cell)
+        near.append(c)
+        total += c
+        if len(near) > MAX_AXIS_NODES:
+            raise MeshError(
+                f"a tier of {length} m in cells of {cell} m needs more than {MAX_AXIS_NODES} cells"
+            )
+    if gap - total < cell:  # the tier reaches the block's end (no sliver below it)
+        return _outer_cells(gap, first, growth, cell)
+    return np.concatenate([near, _outer_cells(gap - total, near[-1], growth, max_cell)])
 
 
 def refined_end(length: float, fine: float, end: float, growth: float) -> np.ndarray:
@@ -101,6 +132,7 @@ def graded_axis(
     growth: float,
     max_cell: float = math.inf,
     hi_cell: float | None = None,
+    lo_tier: tuple[float, float] | None = None,
 ) -> np.ndarray:
     """Node coordinates (n,) from lo to hi, uniform (<= fine) on ``region``, geometric outside.
 
@@ -110,6 +142,9 @@ def graded_axis(
     ``hi_cell`` (m, at most ``fine``): the region's cells shrink toward its high end to this
     length there, by at most ``growth`` per cell (``refined_end``; e.g. the top surface); the
     cells outside the region grow from its end cells.
+    ``lo_tier`` (length, cell) in m: below the region's low end, over that length, the cells grow
+    only to ``cell`` (at least ``fine``) before they grow on to ``max_cell`` (e.g. a crater's
+    path below the working region, in cells of a bounded height).
     """
     if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
         raise MeshError(f"axis bounds must be finite with hi > lo, got ({lo}, {hi})")
@@ -148,7 +183,7 @@ def graded_axis(
     # the cells outside grow from the region's (from its end cell above a refined end, and
     # below it from the fine one unless the refinement reaches the region's low side)
     low = float(inner[0]) if inner[0] * growth < h else h
-    left = _outer_cells(a - lo, low, growth, max_cell)[::-1]
+    left = _lower_cells(a - lo, low, growth, max_cell, lo_tier)[::-1]
     right = _outer_cells(hi - b, float(inner[-1]), growth, max_cell)
     cells = np.concatenate([left, inner, right])
     if cells.size + 1 > MAX_AXIS_NODES:

@@ -94,6 +94,7 @@ class Grid:
         growth: float = 1.2,
         max_cell_m: float | Sequence[float] = math.inf,
         top_cell_m: float | None = None,
+        bottom_tier_m: tuple[float, float] | None = None,
         size_m: tuple[float, float, float] = (0.2, 0.1, 0.1),
         origin_m: tuple[float, float, float] = (0.0, 0.0, 0.0),
     ) -> Grid:
@@ -103,17 +104,20 @@ class Grid:
         ``max_cell_m``; ``fine_m`` and ``max_cell_m`` are one length or one per axis (x, y, z).
         A box side within one fine cell of the block's face is extended to it. ``top_cell_m``:
         the box's cells shrink toward its top (z high) side to this length there, by at most
-        ``growth`` per cell (None: uniform up to it).
+        ``growth`` per cell (None: uniform up to it). ``bottom_tier_m`` (length, cell): below the
+        box, over that length, the cells grow in z only to that height before they grow on
+        (None: no tier).
         """
         lo, hi = _triple("region_lo_m", region_lo_m), _triple("region_hi_m", region_hi_m)
         fine = _triple("fine_m", fine_m)
         cap = _triple("max_cell_m", max_cell_m)
         probe = cls((2, 2, 2), size_m=size_m, origin_m=origin_m)  # validates size and origin
         ends = (None, None, top_cell_m)
+        tiers = (None, None, bottom_tier_m)
         axes = [
-            graded_axis(o, o + s, (a, b), f, growth, c, hi_cell=e)
-            for o, s, a, b, f, c, e in zip(
-                probe.origin_m, probe.size_m, lo, hi, fine, cap, ends, strict=True
+            graded_axis(o, o + s, (a, b), f, growth, c, hi_cell=e, lo_tier=t)
+            for o, s, a, b, f, c, e, t in zip(
+                probe.origin_m, probe.size_m, lo, hi, fine, cap, ends, tiers, strict=True
             )
         ]
         return cls.from_axes(*axes)

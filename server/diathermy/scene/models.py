@@ -22,7 +22,7 @@ from diathermy.scene.resolution import (
     Box,
     Resolution,
     graded_grid,
-    working_region,
+    resolved_region,
 )
 
 SCHEMA_VERSION: Literal[1] = 1
@@ -352,11 +352,11 @@ class Scene(_Model):
         return graded_grid(self.resolution, self.block_m, self.electrodes)
 
     def working_region(self) -> Box | None:
-        """The box ((x, y, z) low, high) in m where ``node_grid()`` is fine; None on a uniform
-        grid (equally fine everywhere)."""
+        """The box ((x, y, z) low, high) in m where ``node_grid()`` is fine (the working box with
+        its deep tier, if any); None on a uniform grid (equally fine everywhere)."""
         if self.resolution is None:
             return None
-        return working_region(self.resolution, self.block_m, self.electrodes)
+        return resolved_region(self.resolution, self.block_m, self.electrodes)
 
     def on_uniform_grid(self, shape: tuple[int, int, int]) -> Scene:
         """This scene on a uniform grid of ``shape`` nodes (nz, ny, nx): its resolution dropped."""

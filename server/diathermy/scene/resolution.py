@@ -6,7 +6,9 @@ tensor-product grid (``Grid.graded``): cells of at most ``fine_m`` over a workin
 block's faces. The working box is given, or by default the electrodes' contacts (a path's
 bounding box for a moving electrode) plus ``margin_m`` sideways and ``depth_m`` down from the
 top surface. ``surface_m`` (optional) shrinks the box's cells toward its top side to that height,
-by the same growth ratio.
+by the same growth ratio. ``deep_m`` (optional) adds a deep tier below the box: down to that depth
+the cells keep the box's width and grow in height only to ``deep_z_m``, so a crater that digs
+below the box stays in resolved cells at a fraction of the box's cost per depth.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from typing import Annotated, Protocol
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from diathermy.errors import MeshError
 from diathermy.mesh import Grid
 
 MAX_GRADED_NODES = 4_000_000
@@ -61,6 +64,15 @@ class Resolution(BaseModel):
     depth_m: Annotated[float, Field(gt=0, le=1.0, allow_inf_nan=False)] = Field(
         12e-3, description="default working region: depth below the top surface, m"
     )
+    deep_m: Annotated[float, Field(gt=0, le=1.0, allow_inf_nan=False)] | None = Field(
+        None,
+        description="deep tier: depth below the top surface, m, down to which the cells under "
+        "the working region grow in height only to deep_z_m (their width stays fine_m), for a "
+        "crater that digs below depth_m; None: no tier",
+    )
+    deep_z_m: Annotated[float, Field(ge=2e-5, le=0.05, allow_inf_nan=False)] | None = Field(
+        None, description="largest cell height in the deep tier, m; None: twice the region's"
+    )
     region_m: tuple[Point3, Point3] | None = Field(
         None,
         description="working box ((x, y, z) low corner, (x, y, z) high corner) in m; None: "
@@ -80,6 +92,17 @@ class Resolution(BaseModel):
                 f"surface_m ({self.surface_m} m) must not exceed {height} "
                 f"({self.fine_spacing_m[2]} m)"
             )
+        if self.deep_m is not None:
+            if self.region_m is None and self.deep_m <= self.depth_m:
+                raise ValueError(
+                    f"deep_m ({self.deep_m} m) must exceed depth_m ({self.depth_m} m): the deep "
+                    "tier lies below the working region"
+                )
+            if not self.fine_spacing_m[2] <= self.deep_cell_m <= self.max_cell_m:
+                raise ValueError(
+                    f"deep_z_m ({self.deep_cell_m} m) must lie between {height} "
+                    f"({self.fine_spacing_m[2]} m) and max_cell_m ({self.max_cell_m} m)"
+                )
         if self.region_m is not None:
             lo, hi = self.region_m
             if any(b < a for a, b in zip(lo, hi, strict=True)):
@@ -91,6 +114,11 @@ class Resolution(BaseModel):
         """The working region's largest cell along (x, y, z) in m."""
         z = self.fine_m if self.fine_z_m is None else self.fine_z_m
         return (self.fine_m, self.fine_m, z)
+
+    @property
+    def deep_cell_m(self) -> float:
+        """The deep tier's largest cell height in m (``deep_z_m``, or twice the region's)."""
+        return 2.0 * self.fine_spacing_m[2] if self.deep_z_m is None else self.deep_z_m
 
 
 class _Path(Protocol):
@@ -157,6 +185,36 @@ def working_region(
     )
 
 
+def deep_tier(resolution: Resolution, box: Box, top_m: float) -> tuple[float, float] | None:
+    """The deep tier below the working ``box`` as (length, largest cell height) in m, clipped to
+    the block's bottom at z = 0; None without one. Raises MeshError when ``deep_m`` does not
+    reach below the box."""
+    if resolution.deep_m is None:
+        return None
+    bottom = max(top_m - resolution.deep_m, 0.0)
+    length = box[0][2] - bottom
+    if length <= 0.0:
+        if box[0][2] <= 0.0:
+            return None  # the box already reaches the block's bottom
+        raise MeshError(
+            f"deep_m ({resolution.deep_m} m) must reach below the working region, whose "
+            f"bottom lies {top_m - box[0][2]:.6g} m below the top surface"
+        )
+    return (length, resolution.deep_cell_m)
+
+
+def resolved_region(
+    resolution: Resolution, block_m: Sequence[float], electrodes: Sequence[_Electrode]
+) -> Box:
+    """Where the graded grid resolves a crater: the working box, down to the bottom of its deep
+    tier when it has one (m)."""
+    lo, hi = working_region(resolution, block_m, electrodes)
+    tier = deep_tier(resolution, (lo, hi), float(block_m[2]))
+    if tier is None:
+        return (lo, hi)
+    return ((lo[0], lo[1], lo[2] - tier[0]), hi)
+
+
 def graded_grid(
     resolution: Resolution, block_m: Sequence[float], electrodes: Sequence[_Electrode]
 ) -> Grid:
@@ -169,5 +227,6 @@ def graded_grid(
         growth=resolution.growth,
         max_cell_m=resolution.max_cell_m,
         top_cell_m=resolution.surface_m,
+        bottom_tier_m=deep_tier(resolution, (lo, hi), float(block_m[2])),
         size_m=(float(block_m[0]), float(block_m[1]), float(block_m[2])),
     )
