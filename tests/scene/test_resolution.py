@@ -184,6 +184,7 @@ def test_a_deep_tier_keeps_the_cells_bounded_below_the_working_region():
 
 
 def test_a_deep_tier_above_the_region_or_of_the_wrong_height_is_refused():
+    assert Resolution(fine_m=4e-3, deep_m=0.1).deep_cell_m == 6.25e-3  # twice, within the cap
     with pytest.raises(ValidationError, match=r"deep_m .* must exceed depth_m"):
         Resolution(deep_m=10e-3)
     with pytest.raises(ValidationError, match=r"deep_z_m .* must lie between fine_m"):

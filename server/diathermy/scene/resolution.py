@@ -71,7 +71,9 @@ class Resolution(BaseModel):
         "crater that digs below depth_m; None: no tier",
     )
     deep_z_m: Annotated[float, Field(ge=2e-5, le=0.05, allow_inf_nan=False)] | None = Field(
-        None, description="largest cell height in the deep tier, m; None: twice the region's"
+        None,
+        description="largest cell height in the deep tier, m; None: twice the region's (at "
+        "most max_cell_m)",
     )
     region_m: tuple[Point3, Point3] | None = Field(
         None,
@@ -117,8 +119,11 @@ class Resolution(BaseModel):
 
     @property
     def deep_cell_m(self) -> float:
-        """The deep tier's largest cell height in m (``deep_z_m``, or twice the region's)."""
-        return 2.0 * self.fine_spacing_m[2] if self.deep_z_m is None else self.deep_z_m
+        """The deep tier's largest cell height in m (``deep_z_m``, or twice the region's within
+        ``max_cell_m``)."""
+        if self.deep_z_m is None:
+            return min(2.0 * self.fine_spacing_m[2], self.max_cell_m)
+        return self.deep_z_m
 
 
 class _Path(Protocol):
