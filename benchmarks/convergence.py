@@ -81,13 +81,15 @@ def scene_for(
     surface_mm: float | None = None,
     depth_mm: float | None = None,
     fine_z_mm: float | None = None,
+    deep_mm: float | None = None,
 ) -> Scene:
     """The fixed electrode (current-density drive) with its resolution at ``fine_mm`` (0: uniform
     33x33x65), or the moving electrode as shipped (``fine_mm`` None: its own grid); the cut
     driver's non-local length at ``length_mm``, the electrode's contact model at ``contact``,
     the cell height at the top surface at ``surface_mm`` (None: the scene's; 0: fine_mm), the
-    working region's depth at ``depth_mm`` (None: the scene's) and its cell height at
-    ``fine_z_mm`` (None: fine_mm)."""
+    working region's depth at ``depth_mm`` (None: the scene's), its cell height at
+    ``fine_z_mm`` (None: fine_mm) and a deep tier under it to ``deep_mm`` (None: none, whatever
+    the scene ships, so that the recorded ladder keeps its grids)."""
     scene = builtin_scene("moving-electrode" if moving else "fixed-electrode")
     if fine_mm is not None and fine_mm <= 0:
         scene = scene.on_uniform_grid(UNIFORM)
@@ -108,6 +110,9 @@ def scene_for(
         base["resolution"] = {**base["resolution"], "depth_m": depth_mm * 1e-3}
     if fine_z_mm is not None and base.get("resolution") is not None:
         base["resolution"] = {**base["resolution"], "fine_z_m": fine_z_mm * 1e-3}
+    if not moving and base.get("resolution") is not None:
+        deep = deep_mm * 1e-3 if deep_mm else None
+        base["resolution"] = {**base["resolution"], "deep_m": deep}
     return Scene.model_validate(base)
 
 
@@ -120,10 +125,11 @@ def tag_of(
     surface_mm: float = 0.0,
     depth_mm: float = REGION_DEPTH_MM,
     fine_z_mm: float | None = None,
+    deep_mm: float | None = None,
 ) -> str:
     """The run's file tag: scene, grid, dt if not the default, the non-local length if any, the
     contact model if not flat, the surface cell if refined, the region's depth if not 12 mm, the
-    region's cell height if not the fine spacing."""
+    region's cell height if not the fine spacing, the deep tier's depth if any."""
     kind = "moving" if moving else "fixed"
     grid = "default" if fine_mm is None else "uniform" if fine_mm <= 0 else f"{fine_mm:g}mm"
     tag = f"{kind}_{grid}" + ("" if dt_s == DT_S else f"_dt{dt_s:g}")
@@ -131,7 +137,8 @@ def tag_of(
     tag += "" if contact == "flat" else f"_{contact}"
     tag += f"_s{surface_mm:g}" if surface_mm > 0 else ""
     tag += "" if depth_mm in (0.0, REGION_DEPTH_MM) else f"_d{depth_mm:g}"
-    return tag + ("" if fine_z_mm is None or fine_z_mm == fine_mm else f"_z{fine_z_mm:g}")
+    tag += "" if fine_z_mm is None or fine_z_mm == fine_mm else f"_z{fine_z_mm:g}"
+    return tag + (f"_deep{deep_mm:g}" if deep_mm else "")
 
 
 def front_strain_energy(sim: Simulation) -> float:
@@ -172,10 +179,11 @@ def run(
     surface_mm: float | None = None,
     depth_mm: float | None = None,
     fine_z_mm: float | None = None,
+    deep_mm: float | None = None,
 ) -> Path:
     scene = scene_for(
         fine_mm, moving=moving, dt_s=dt_s, length_mm=length_mm, contact=contact,
-        surface_mm=surface_mm, depth_mm=depth_mm, fine_z_mm=fine_z_mm,
+        surface_mm=surface_mm, depth_mm=depth_mm, fine_z_mm=fine_z_mm, deep_mm=deep_mm,
     )  # fmt: skip
     length_mm = scene.level_set.nonlocal_length_m * 1e3
     contact = scene.electrodes[0].contact
@@ -227,7 +235,7 @@ def run(
         profiles["profile_end"] = crater_profile(sim, centre)
     tag = tag_of(
         fine_mm, moving, dt_s, length_mm, contact, surface_mm,
-        REGION_DEPTH_MM if depth_mm is None else depth_mm, fine_z_mm,
+        REGION_DEPTH_MM if depth_mm is None else depth_mm, fine_z_mm, deep_mm,
     )  # fmt: skip
     out = RESULTS / f"convergence_{tag}.npz"
     arrays: dict[str, Any] = {**{k: np.asarray(v) for k, v in rec.items()}, **profiles}
@@ -237,6 +245,7 @@ def run(
         fine_mm=res.fine_m * 1e3 if res is not None else 0.0,
         fine_z_mm=res.fine_spacing_m[2] * 1e3 if res is not None else 0.0,
         depth_mm=res.depth_m * 1e3 if res is not None else 0.0,
+        deep_mm=res.deep_m * 1e3 if res is not None and res.deep_m is not None else 0.0,
         dt_s=scene.dt_s,
         kappa=sim.tissue.damage_kappa_j_per_m3,
         moving=moving,
@@ -443,6 +452,12 @@ def main(argv: list[str] | None = None) -> int:
         type=float,
         help="the working region's cell height (default: the fine spacing)",
     )
+    r.add_argument(
+        "--deep-mm",
+        type=float,
+        help="a deep tier under the working region down to this depth (resolution.deep_m; "
+        "default: none, whatever the scene ships)",
+    )
     pw = sub.add_parser("power")
     pw.add_argument("--fine-mm", type=float, nargs="+", required=True)
     mj = sub.add_parser("main-job")
@@ -472,6 +487,7 @@ def main(argv: list[str] | None = None) -> int:
             surface_mm=a.surface_mm,
             depth_mm=a.depth_mm,
             fine_z_mm=a.fine_z_mm,
+            deep_mm=a.deep_mm,
         )
     elif a.cmd == "cost":
         surface_cost(a.fine_mm, a.surface_mm, a.warm, a.steps)

@@ -48,6 +48,10 @@ def test_scene_family(bench: ModuleType) -> None:
     assert fine.resolution.fine_m == pytest.approx(0.8e-3) and fine.dt_s == 0.015
     assert fine.electrodes[0].drive == "current_density"
     assert fine.resolution.depth_m == bench.builtin_scene("fixed-electrode").resolution.depth_m
+    assert fine.resolution.deep_m is None  # the ladder's grids, whatever the scene ships
+    deep = bench.scene_for(0.8, moving=False, deep_mm=40.0)
+    assert deep.resolution.deep_m == pytest.approx(40e-3)
+    assert bench.tag_of(0.8, False, deep_mm=40.0) == "fixed_0.8mm_deep40"
     uniform = bench.scene_for(0, moving=False)
     assert uniform.resolution is None and uniform.node_shape == (33, 33, 65)
     moving = bench.scene_for(None, moving=True)
