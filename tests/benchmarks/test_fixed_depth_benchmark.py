@@ -22,7 +22,7 @@ def test_the_tier_deepens_the_fine_region_and_the_report_compares(
 ) -> None:
     for deep in (0.0, 30.0):
         bench.run_one(deep, 0.06, tmp_path, "test", base="default")
-    plain = json.loads((tmp_path / "fixed_depth_shipped.json").read_text())
+    plain = json.loads((tmp_path / "fixed_depth_notier.json").read_text())
     tier = json.loads((tmp_path / "fixed_depth_deep30.json").read_text())
     assert plain["region_bottom_mm"] == pytest.approx(16.0)
     assert tier["region_bottom_mm"] == pytest.approx(30.0)
@@ -30,7 +30,7 @@ def test_the_tier_deepens_the_fine_region_and_the_report_compares(
     assert len(plain["steps"]) == len(tier["steps"]) == 2
     assert all(s["power_w"] == pytest.approx(50.0, rel=1e-6) for s in tier["steps"])
     table = bench.report(tmp_path).read_text()
-    assert "| shipped " in table and "| deep30 " in table and "`test`" in table
+    assert "| notier " in table and "| deep30 " in table and "`test`" in table
     assert bench.at(tier["steps"], 0.06, "time_s") == pytest.approx(0.06)
     assert bench.at(tier["steps"], 1.5, "time_s") is None  # past the run's end
     assert bench.left_at(tier["steps"]) is None

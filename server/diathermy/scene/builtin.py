@@ -12,9 +12,17 @@ MOVING_PATH_M = [(0.04, 0.05), (0.07, 0.035), (0.10, 0.06), (0.13, 0.04), (0.16,
 """A curvilinear path on the top surface (x, y) in m, ~14 cm long: 12 s at 12.35 mm/s."""
 
 
-FIXED_RESOLUTION = Resolution()
-"""The fixed electrode's grid: 0.4 mm cells over the contact + 2 mm, 12 mm deep (the crater's
-depth at 6 s with margin), growing by 1.25 to 6.25 mm (benchmarks/results/convergence.md)."""
+FIXED_RESOLUTION = Resolution(deep_m=90e-3)
+"""The fixed electrode's grid: 0.4 mm cells over the contact + 2 mm, 12 mm deep, and a deep tier
+below it to 90 mm (cells 0.4 mm wide, at most 0.8 mm tall), growing by 1.25 to 6.25 mm outside
+(136x49x65 = 433 k nodes). Its 50 W crater leaves the 12 mm at 1.71 s and is 79.5 mm deep at
+12 s: without the tier (169 k nodes) the crater was 0.83 / 0.64 of this grid's at 6 / 12 s, in
+cells growing to 6.25 mm; with it, 2.6x the nodes, 3.5x the median step and 2.3x the memory
+(7.1 GiB; benchmarks/results/fixed_depth.md)."""
+
+COAGULATION_RESOLUTION = Resolution()
+"""The coagulation scene's grid: the fixed electrode's without the deep tier (no crater; the
+lesion is ~0.8 mm deep)."""
 
 MOVING_RESOLUTION = Resolution(fine_m=1e-3, depth_m=3e-3)
 """The moving electrodes' grid: 1 mm cells over the path's bounding box + 2 mm, 3 mm deep. The
@@ -32,7 +40,8 @@ def _fixed() -> Scene:
         name="fixed-electrode",
         description="The paper's fixed-electrode scenario: a 50 W ball electrode held at the "
         "centre of the top surface for 12 s (400 steps of 0.03 s), all effects, on a graded "
-        "grid (0.4 mm under the electrode).",
+        "grid (0.4 mm under the electrode, 12 mm deep, and 0.4 mm wide cells at most 0.8 mm "
+        "tall to 90 mm, where the crater drills).",
         resolution=FIXED_RESOLUTION,
         steps=400,
     )
@@ -89,7 +98,7 @@ def _coagulation() -> Scene:
         "Without vaporization the scene holds only below boiling: 0.5 W keeps the hottest node "
         "at 357 K, where 20 W passed boiling in 0.08 s and reached 2200 K.",
         electrodes=[Electrode(power_w=COAGULATION_POWER_W)],
-        resolution=FIXED_RESOLUTION,
+        resolution=COAGULATION_RESOLUTION,
         effects=["electric", "thermal", "thermal_damage"],
         steps=200,
     )
