@@ -34,6 +34,7 @@ from datetime import UTC, datetime  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
+from tqdm import tqdm  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "server"))
@@ -70,8 +71,10 @@ def run_one(
     sim = Simulation(scene)
     build_s = time.perf_counter() - t0
     steps: list[dict[str, float]] = []
-    for _ in range(round(seconds / scene.dt_s)):
+    bar = tqdm(range(round(seconds / scene.dt_s)), desc=tag_of(deep_mm), unit="step")
+    for _ in bar:
         r = sim.step()
+        bar.set_postfix_str(f"{r.cut_volume_m3 * 1e9:.1f} mm^3, {r.crater_depth_m * 1e3:.1f} mm")
         steps.append(
             {
                 "time_s": r.time_s,

@@ -183,6 +183,18 @@ def test_a_deep_tier_keeps_the_cells_bounded_below_the_working_region():
     assert whole.working_region()[0][2] == 0.0
 
 
+def test_the_fixed_electrode_ships_its_tier_and_coagulation_does_not():
+    """The 50 W crater drills ~80 mm in 12 s (benchmarks/results/fixed_depth.md): the scene's
+    cells under the contact stay at most 0.8 mm tall to 90 mm; coagulation has no crater."""
+    fixed, coag = builtin_scene("fixed-electrode"), builtin_scene("coagulation")
+    z = fixed.node_grid().axes()[2]
+    tier = z[:-1] >= fixed.block_m[2] - 90e-3 - 1e-12
+    assert np.diff(z)[tier].max() <= 0.8e-3 * (1 + 1e-9)
+    assert fixed.working_region()[0][2] == pytest.approx(fixed.block_m[2] - 90e-3)
+    assert coag.resolution is not None and coag.resolution.deep_m is None
+    assert coag.working_region()[0][2] == pytest.approx(coag.block_m[2] - 12e-3)
+
+
 def test_a_deep_tier_above_the_region_or_of_the_wrong_height_is_refused():
     assert Resolution(fine_m=4e-3, deep_m=0.1).deep_cell_m == 6.25e-3  # twice, within the cap
     with pytest.raises(ValidationError, match=r"deep_m .* must exceed depth_m"):

@@ -18,7 +18,7 @@ below it to 90 mm (cells 0.4 mm wide, at most 0.8 mm tall), growing by 1.25 to 6
 (136x49x65 = 433 k nodes). Its 50 W crater leaves the 12 mm at 1.71 s and is 79.5 mm deep at
 12 s: without the tier (169 k nodes) the crater was 0.83 / 0.64 of this grid's at 6 / 12 s, in
 cells growing to 6.25 mm; with it, 2.6x the nodes, 3.5x the median step and 2.3x the memory
-(7.1 GiB; benchmarks/results/fixed_depth.md)."""
+(7133 against 3081 MiB; benchmarks/results/fixed_depth.md)."""
 
 COAGULATION_RESOLUTION = Resolution()
 """The coagulation scene's grid: the fixed electrode's without the deep tier (no crater; the
