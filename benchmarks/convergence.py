@@ -422,6 +422,9 @@ def surface_cost(fine_mm: float, surface_mm: float, warm: int, steps: int) -> Pa
 
 
 def main(argv: list[str] | None = None) -> int:
+    from diathermy.runtime import configure_threads
+
+    configure_threads()  # as the CLI and the server run: one BLAS thread
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run")

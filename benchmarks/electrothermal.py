@@ -495,6 +495,9 @@ NOTES = """
 
 
 def main(argv: list[str] | None = None) -> None:
+    from diathermy.runtime import configure_threads
+
+    configure_threads()  # as the CLI and the server run: one BLAS thread
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--grids", default="17x17x33,33x33x65,64x64x128")
     ap.add_argument("--repeat", type=int, default=3)

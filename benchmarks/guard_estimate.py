@@ -130,6 +130,9 @@ def write(results: dict[str, list[dict[str, Any]]], a: argparse.Namespace, start
 
 
 def main() -> None:
+    from diathermy.runtime import configure_threads
+
+    configure_threads()  # as the CLI and the server run: one BLAS thread
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--scenes", nargs="+", choices=SCENES, default=["default", "fixed-electrode"])
     ap.add_argument("--grids", nargs="+", choices=("own", "uniform"), default=["own"])

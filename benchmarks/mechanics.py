@@ -194,6 +194,9 @@ def write_table(rows: list[dict], repeat: int) -> str:
 
 
 def main() -> None:
+    from diathermy.runtime import configure_threads
+
+    configure_threads()  # as the CLI and the server run: one BLAS thread
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--grids", default="17x17x33,33x33x65,64x64x128")
     ap.add_argument("--repeat", type=int, default=3)

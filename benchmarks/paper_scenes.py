@@ -321,6 +321,9 @@ def _figures(runs: dict, plt) -> None:
 
 
 def main() -> None:
+    from diathermy.runtime import configure_threads
+
+    configure_threads()  # as the CLI and the server run: one BLAS thread
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("command", nargs="?", default="all", choices=["all", "run", "report"])
     ap.add_argument("--scene", default="fixed-electrode")

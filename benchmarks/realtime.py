@@ -450,6 +450,9 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main() -> None:
+    from diathermy.runtime import configure_threads
+
+    configure_threads()  # as the CLI and the server run: one BLAS thread
     ap = parser()
     a = ap.parse_args()
     started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())

@@ -82,11 +82,11 @@ def test_refreshed_coarse_operators_are_the_galerkin_products(mesh):  # noqa: AN
 
 
 def test_coarsest_solve_follows_the_refresh(mesh):  # noqa: ANN001
-    """The coarsest direct solve (a pseudo-inverse formed at its first use) is the refreshed
+    """The coarsest direct solve (a Cholesky factor formed at its first use) is the refreshed
     operator's, not the one of the build it was first formed for."""
     first = _chain(mesh, True, (0.015,))[0]
     k = first.krylov
-    _ = k.kept_preconditioner @ np.ones(k.A.shape[0])  # forms the build's pseudo-inverse
+    _ = k.kept_preconditioner @ np.ones(k.A.shape[0])  # forms the build's factor
     E_r, healthy = _cut(mesh, 0.03)
     MechanicsSolver(
         mesh,

@@ -7,7 +7,14 @@ import pyamg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from diathermy.fem.multigrid import scaled_amg_preconditioner, unit_diagonal, v_cycle_preconditioner
+from diathermy.fem.multigrid import (
+    CholeskyCoarseSolver,
+    coarse_solver,
+    deterministic_sa,
+    scaled_amg_preconditioner,
+    unit_diagonal,
+    v_cycle_preconditioner,
+)
 
 
 def test_v_cycle_equals_pyamg_preconditioner(rng):
@@ -48,3 +55,45 @@ def test_scaled_amg_preconditions_a_high_contrast_problem(rng):
     )  # fmt: skip
     assert info == 0 and its[0] < 60
     assert np.linalg.norm(b - A @ x) <= 1e-8 * np.linalg.norm(b) * 1.01
+
+
+def test_cholesky_coarse_solver_solves_an_spd_operator_exactly(rng):
+    A = pyamg.gallery.poisson((7, 8), format="bsr") + sp.eye(56, format="bsr")
+    solve = CholeskyCoarseSolver()
+    b = rng.normal(size=56)
+    x = solve(A, b)
+    assert not solve.fell_back and x.shape == b.shape
+    assert np.linalg.norm(A @ x - b) <= 1e-12 * np.linalg.norm(b)
+    B = rng.normal(size=(56, 3))  # several right-hand sides, as pyamg may pass
+    assert np.allclose(solve(A, B), np.linalg.solve(A.toarray(), B), rtol=1e-10, atol=1e-12)
+
+
+def test_cholesky_coarse_solver_falls_back_to_the_pseudo_inverse_when_singular(rng):
+    """A pure-Neumann Laplacian (constants in its null space) is not positive definite: the
+    least-norm solution of the pseudo-inverse, as pyamg's default gives."""
+    A = pyamg.gallery.poisson((6, 6), format="csr").tolil()
+    A.setdiag(0)
+    A.setdiag(-np.asarray(A.sum(axis=1)).ravel())
+    A = A.tocsr()
+    b = rng.normal(size=36)
+    b -= b.mean()  # in the range
+    solve = CholeskyCoarseSolver()
+    x = solve(A, b)
+    assert solve.fell_back
+    assert np.allclose(x, np.linalg.pinv(A.toarray()) @ b, rtol=1e-9, atol=1e-12)
+    assert np.linalg.norm(A @ x - b) <= 1e-9 * np.linalg.norm(b)
+
+
+def test_cholesky_hierarchy_cycles_as_the_pseudo_inverse_one(rng):
+    """'cholesky' changes how the coarsest SPD system is solved, not its answer: the same V-cycle
+    as pyamg's 'pinv' to rounding; other names stay pyamg's own."""
+    A = pyamg.gallery.poisson((12, 12, 12), format="csr")
+    opts = {"max_coarse": 40}
+    ml_c = deterministic_sa(A, None, {**opts, "coarse_solver": "cholesky"})
+    ml_p = deterministic_sa(A, None, {**opts, "coarse_solver": "pinv"})
+    assert isinstance(ml_c.coarse_solver, CholeskyCoarseSolver)
+    assert not isinstance(coarse_solver("pinv"), CholeskyCoarseSolver)
+    b = rng.normal(size=A.shape[0])
+    ref = v_cycle_preconditioner(ml_p) @ b
+    got = v_cycle_preconditioner(ml_c) @ b
+    assert np.linalg.norm(got - ref) <= 1e-10 * np.linalg.norm(ref)

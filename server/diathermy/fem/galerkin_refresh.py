@@ -28,9 +28,9 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
-from pyamg.multilevel import coarse_grid_solver
 
 from diathermy.fem.bsr_blocks import block_rows, scale_blocks
+from diathermy.fem.multigrid import coarse_solver
 
 
 @dataclass(frozen=True)
@@ -325,7 +325,7 @@ class GalerkinRefresh:
         before = edits.pos.size
         edits.set(pos, edits.base(pos) + values)
         if k == len(self._coarse) - 1 and (before or pos.size):
-            self._ml.coarse_solver = coarse_grid_solver(self._coarse_solver)
+            self._ml.coarse_solver = coarse_solver(self._coarse_solver)
 
     def _reset(self) -> None:
         """Every coarse level and the fine prolongator back to their build-time values."""

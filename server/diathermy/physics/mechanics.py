@@ -51,9 +51,11 @@ DEFAULT_AMG_OPTIONS: dict[str, Any] = {
     "presmoother": _CHEBYSHEV,
     "postsmoother": _CHEBYSHEV,
     "max_coarse": 64,
-    "coarse_solver": "pinv",
+    "coarse_solver": "cholesky",
 }
-"""Smoothed aggregation for the 3x3-block elasticity matrix (measured in benchmarks/mechanics.py)."""
+"""Smoothed aggregation for the 3x3-block elasticity matrix (measured in benchmarks/mechanics.py).
+The coarsest level is factored (``fem.multigrid.coarse_solver``): pyamg's pseudo-inverse took
+16-140 ms a cutting step on the default graded grid, formed again after every cut."""
 MAX_UPDATED_TETS = 0.05
 """A new topology updates the previous stiffness when at most this fraction of tets changed E
 (a cut step changes a few dozen); above it assembling anew is as cheap."""
