@@ -9,7 +9,7 @@ halving fine spacing, the paper's moving electrode, and the uniform 33x33x65 bes
     python benchmarks/convergence.py main-job                               # default vs uniform
     python benchmarks/convergence.py probe --fine-mm 0.8 0.4 --steps 40     # under the contact
     python benchmarks/convergence.py run --fine-mm 0.4 --surface-mm 0.1      # surface-refined
-    python benchmarks/convergence.py cost --fine-mm 0.4 --surface-mm 0.1     # its step cost
+    python benchmarks/convergence.py cost --fine-mm 0.4 --surface-mm 0.1 [--deep-mm 90]  # its cost
     python benchmarks/convergence.py report                                 # table + plot
 
 ``run`` steps the fixed-electrode scene (current-density drive, 5.72e4 A/m^2 over the 1.17 mm
@@ -86,7 +86,8 @@ def scene_for(
     """The fixed electrode (current-density drive) with its resolution at ``fine_mm`` (0: uniform
     33x33x65), or the moving electrode as shipped (``fine_mm`` None: its own grid); the cut
     driver's non-local length at ``length_mm``, the electrode's contact model at ``contact``,
-    the cell height at the top surface at ``surface_mm`` (None: the scene's; 0: fine_mm), the
+    the cell height at the top surface at ``surface_mm`` (None or 0: fine_mm up to the surface,
+    whatever the fixed scene ships), the
     working region's depth at ``depth_mm`` (None: the scene's), its cell height at
     ``fine_z_mm`` (None: fine_mm) and a deep tier under it to ``deep_mm`` (None: none, whatever
     the scene ships, so that the recorded ladder keeps its grids)."""
@@ -103,8 +104,8 @@ def scene_for(
         base["level_set"] = {**base["level_set"], "nonlocal_length_m": length_mm * 1e-3}
     if contact is not None:
         base["electrodes"] = [{**e, "contact": contact} for e in base["electrodes"]]
-    if surface_mm is not None and base.get("resolution") is not None:
-        surface = surface_mm * 1e-3 if surface_mm > 0 else None
+    if not moving and base.get("resolution") is not None:  # none unless given, as deep_mm
+        surface = surface_mm * 1e-3 if surface_mm else None
         base["resolution"] = {**base["resolution"], "surface_m": surface}
     if depth_mm is not None and base.get("resolution") is not None:
         base["resolution"] = {**base["resolution"], "depth_m": depth_mm * 1e-3}
@@ -380,13 +381,16 @@ def main_job(steps: int) -> Path:
     return out
 
 
-def surface_cost(fine_mm: float, surface_mm: float, warm: int, steps: int) -> Path:
+def surface_cost(
+    fine_mm: float, surface_mm: float, warm: int, steps: int, deep_mm: float | None = None
+) -> Path:
     """What the surface refinement costs a step: the fixed electrode (current-density drive,
     the incremental default) on the plain grid of ``fine_mm`` and on the one refined to
-    ``surface_mm`` at the top, ``warm`` steps each (past the first cut), then ``steps`` steps
-    each, alternating, so the shared machine's load falls on both alike."""
+    ``surface_mm`` at the top (both with a deep tier to ``deep_mm`` when given), ``warm`` steps
+    each (past the first cut), then ``steps`` steps each, alternating, so the shared machine's
+    load falls on both alike."""
     sims = {
-        name: Simulation(scene_for(fine_mm, moving=False, surface_mm=surface))
+        name: Simulation(scene_for(fine_mm, moving=False, surface_mm=surface, deep_mm=deep_mm))
         for name, surface in (("plain", 0.0), ("surface", surface_mm))
     }
     for sim in sims.values():
@@ -412,9 +416,12 @@ def surface_cost(fine_mm: float, surface_mm: float, warm: int, steps: int) -> Pa
         }
         for name, surface in (("plain", 0.0), ("surface", surface_mm))
     }
-    out = RESULTS / "convergence_surface_cost.json"
+    out = RESULTS / f"convergence_surface_cost{f'_deep{deep_mm:g}' if deep_mm else ''}.json"
     out.write_text(
-        json.dumps({"fine_mm": fine_mm, "warm": warm, "steps": steps, "runs": rows}, indent=1),
+        json.dumps(
+            {"fine_mm": fine_mm, "deep_mm": deep_mm, "warm": warm, "steps": steps, "runs": rows},
+            indent=1,
+        ),
         encoding="utf-8",
     )
     print(f"{out.name}: median {rows['surface']['median_s'] / rows['plain']['median_s']:.2f}x")
@@ -473,6 +480,7 @@ def main(argv: list[str] | None = None) -> int:
     co.add_argument("--surface-mm", type=float, default=0.1)
     co.add_argument("--warm", type=int, default=4)
     co.add_argument("--steps", type=int, default=10)
+    co.add_argument("--deep-mm", type=float, help="both grids with a deep tier to this depth")
     sub.add_parser("report")
     a = ap.parse_args(argv)
     if a.cmd == "run":
@@ -493,7 +501,7 @@ def main(argv: list[str] | None = None) -> int:
             deep_mm=a.deep_mm,
         )
     elif a.cmd == "cost":
-        surface_cost(a.fine_mm, a.surface_mm, a.warm, a.steps)
+        surface_cost(a.fine_mm, a.surface_mm, a.warm, a.steps, a.deep_mm)
     elif a.cmd == "power":
         power(a.fine_mm)
     elif a.cmd == "main-job":

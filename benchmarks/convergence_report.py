@@ -102,18 +102,25 @@ def _power_lines(ref_w: float, results: Path) -> list[str]:
 
 
 def _cost_lines(results: Path) -> list[str]:
-    """What the surface refinement costs a step (``cost``'s JSON in ``results``)."""
-    path = results / "convergence_surface_cost.json"
-    if not path.exists():
-        return []
-    c = json.loads(path.read_text())
+    """What the surface refinement costs a step (each of ``cost``'s JSONs in ``results``)."""
+    lines: list[str] = []
+    for path in sorted(results.glob("convergence_surface_cost*.json")):
+        lines += _cost_table(json.loads(path.read_text()))
+    return lines
+
+
+def _cost_table(c: dict) -> list[str]:
+    """One ``cost`` run: the plain and the surface-refined grid side by side."""
     p, r = c["runs"]["plain"], c["runs"]["surface"]
     effs = sorted(set(p["effects_median_s"]) | set(r["effects_median_s"]))
+    deep = c.get("deep_mm")
     lines = [
         "",
         f"What the surface refinement costs (`cost --fine-mm {c['fine_mm']:g} --surface-mm "
-        f"{r['surface_mm']:g}`): both grids in one process, {c['warm']} steps each past the "
-        f"first cut, then {c['steps']} steps each, alternating (incremental default):",
+        f"{r['surface_mm']:g}{f' --deep-mm {deep:g}' if deep else ''}`"
+        f"{f', both grids with the deep tier to {deep:g} mm' if deep else ''}): both grids in "
+        f"one process, {c['warm']} steps each past the first cut, then {c['steps']} steps each, "
+        "alternating (incremental default):",
         "",
         "| grid | surface mm | nodes | median step s | mean step s | "
         + " | ".join(f"{e} s" for e in effs)

@@ -233,3 +233,21 @@ def test_sample_nodal_on_graded_axes_is_exact_for_linear_fields():
     pts = rng.uniform((0, 0, 0), g.size_m, size=(50, 3))
     got = sample_nodal(field, pts, origin_m=g.origin_m, spacing_m=None, axes_m=g.axes())
     assert np.allclose(got, 1.0 + 2.0 * pts[:, 0] - 3.0 * pts[:, 1] + 5.0 * pts[:, 2])
+
+
+def test_the_fixed_electrode_resolves_the_boiling_layer_at_its_surface():
+    """The first cut converges once the top cells over the contact are fine/4 (0.1 mm; 0.4 / 0.1 mm
+    within 2 % of 0.2 / 0.05 mm, benchmarks/results/convergence.md): the scene ships them, over
+    its working region only, growing back to 0.4 mm below."""
+    fixed = builtin_scene("fixed-electrode")
+    assert fixed.resolution is not None and fixed.resolution.surface_m == pytest.approx(0.1e-3)
+    grid = fixed.node_grid()
+    x, y, z = grid.axes()
+    dz = np.diff(z)
+    assert dz[-1] == pytest.approx(0.1e-3)
+    below_over_above = dz[-8:-1] / dz[-7:]  # down from the surface: growing by <= 1.25
+    assert np.all((below_over_above >= 1 - 1e-9) & (below_over_above <= 1.25 + 1e-9))
+    assert 0.3e-3 < dz[-8] <= 0.4e-3 * (1 + 1e-9)  # the region's own cells below
+    for axis in (x, y):  # the sideways cells stay the region's
+        assert 0.3e-3 < np.diff(axis).min() <= 0.4e-3 * (1 + 1e-9)
+    assert builtin_scene("coagulation").resolution.surface_m is None  # type: ignore[union-attr]

@@ -12,13 +12,16 @@ MOVING_PATH_M = [(0.04, 0.05), (0.07, 0.035), (0.10, 0.06), (0.13, 0.04), (0.16,
 """A curvilinear path on the top surface (x, y) in m, ~14 cm long: 12 s at 12.35 mm/s."""
 
 
-FIXED_RESOLUTION = Resolution(deep_m=90e-3)
-"""The fixed electrode's grid: 0.4 mm cells over the contact + 2 mm, 12 mm deep, and a deep tier
-below it to 90 mm (cells 0.4 mm wide, at most 0.8 mm tall), growing by 1.25 to 6.25 mm outside
-(136x49x65 = 433 k nodes). Its 50 W crater leaves the 12 mm at 1.71 s and is 79.5 mm deep at
-12 s: without the tier (169 k nodes) the crater was 0.83 / 0.64 of this grid's at 6 / 12 s, in
-cells growing to 6.25 mm; with it, 2.6x the nodes, 3.5x the median step and 2.3x the memory
-(7133 against 3081 MiB; benchmarks/results/fixed_depth.md)."""
+FIXED_RESOLUTION = Resolution(deep_m=90e-3, surface_m=0.1e-3)
+"""The fixed electrode's grid: 0.4 mm cells over the contact + 2 mm, 12 mm deep, shrinking to
+0.1 mm at the top surface, and a deep tier below it to 90 mm (cells 0.4 mm wide, at most 0.8 mm
+tall), growing by 1.25 to 6.25 mm outside (140x49x65 = 446 k nodes). Its 50 W crater leaves the
+12 mm at 1.71 s and is 79.5 mm deep at 12 s: without the tier (169 k nodes) the crater was
+0.83 / 0.64 of the tiered grid's at 6 / 12 s, in cells growing to 6.25 mm; the tier costs 2.6x
+the nodes, 3.5x the median step and 2.3x the memory (7133 against 3081 MiB;
+benchmarks/results/fixed_depth.md). The 0.1 mm top cells resolve the layer that boils first: the
+first cut (current-density drive) at 0.0511 s against 0.0520 s on 0.2 / 0.05 mm, where 0.4 mm
+cells up to the surface give 0.0633 s (+22 %; benchmarks/results/convergence.md)."""
 
 COAGULATION_RESOLUTION = Resolution()
 """The coagulation scene's grid: the fixed electrode's without the deep tier (no crater; the
@@ -40,8 +43,8 @@ def _fixed() -> Scene:
         name="fixed-electrode",
         description="The paper's fixed-electrode scenario: a 50 W ball electrode held at the "
         "centre of the top surface for 12 s (400 steps of 0.03 s), all effects, on a graded "
-        "grid (0.4 mm under the electrode, 12 mm deep, and 0.4 mm wide cells at most 0.8 mm "
-        "tall to 90 mm, where the crater drills).",
+        "grid (0.4 mm under the electrode, 12 mm deep, 0.1 mm at the surface, and 0.4 mm wide "
+        "cells at most 0.8 mm tall to 90 mm, where the crater drills).",
         resolution=FIXED_RESOLUTION,
         steps=400,
     )
