@@ -4,6 +4,7 @@
         [--tolerances X ...] [--variant 'section.key=value, ...' ...] [--from-start | --from-step N]
     python benchmarks/realtime.py report FOLDER   # a run's table and plots again from its json
     python benchmarks/realtime.py profile [--scenes default] [--grids own uniform] [--steps N]
+    python benchmarks/realtime.py timers [--scenes default] [--grids own uniform] [--steps N]
     python benchmarks/realtime.py solvers [--grids 0 0.5] [--steps N] [--rounds N]  # realtime_solvers.py
 
 ``run``: per built-in scene (``default``, ``fixed-electrode``, ``moving-electrode`` at the paper's
@@ -39,6 +40,9 @@ the results are merged into one table.
 
 ``profile``: the same checkpoints, the incremental mode only, under cProfile: the functions
 that take the time of a cutting step (``benchmarks/results/realtime_profile.md``).
+
+``timers``: the same, by wall-clock timers around each effect and the mechanics' parts instead
+(``realtime_timers.py``: cProfile's overhead misplaces time): ``realtime_timers.md``.
 
 ``solvers``: what each solver saving buys in the full mode (``realtime_solvers.py``).
 """
@@ -100,6 +104,12 @@ def warm_up(scene: Scene, path: Path, warmup: int, exact: bool = False) -> tuple
     sim.save_checkpoint(path)
     meta.write_text(json.dumps({"first_cut_step": after_cut, "scene": scene_json}))
     return path, after_cut
+
+
+def checkpoint(name: str, grid: str, warmup: int) -> Path:
+    """The cached checkpoint of built-in scene ``name`` on ``grid`` two steps after its first
+    cut (``warm_up``), made first when there is none."""
+    return warm_up(scene_on(name, grid), CACHE / f"{name}_{grid}.h5", warmup)[0]
 
 
 def scene_on(name: str, grid: str) -> Scene:
@@ -397,6 +407,7 @@ def parser() -> argparse.ArgumentParser:
     for cmd, help_, steps in (
         ("run", "full vs incremental per step, with the errors", 8),
         ("profile", "cProfile of the incremental mode's steps", 6),
+        ("timers", "wall-clock timers around the parts of the incremental mode's steps", 8),
     ):
         r = sub.add_parser(cmd, help=help_)
         r.add_argument("--scenes", nargs="+", choices=SCENES, default=list(SCENES))
@@ -486,6 +497,11 @@ def main() -> None:
         return
     if a.cmd == "profile":
         profile(a, started)
+        return
+    if a.cmd == "timers":
+        from realtime_timers import timers  # the realtime.py timers subcommand
+
+        timers(a, started, lambda n, g: load_as(checkpoint(n, g, a.warmup)))
         return
     if a.cmd == "report":
         if not (a.folder / "realtime.json").is_file():
