@@ -343,11 +343,14 @@ def _main_job(uniform: bool, steps: int) -> dict[str, float]:
     sim = Simulation(scene)
     build_s = time.perf_counter() - t0
     walls, cutting, cut_at = [], [], math.nan
+    effects: dict[str, list[float]] = {}
     for _ in range(steps):
         r = sim.step()
         walls.append(r.wall_s)
         if math.isfinite(cut_at):
             cutting.append(r.wall_s)  # the steps after the first cut: like with like
+            for eff, er in r.effects.items():
+                effects.setdefault(eff, []).append(er.wall_s if er.ran else 0.0)
         if r.cut_volume_m3 > 0 and not math.isfinite(cut_at):
             cut_at = r.time_s
     return {
@@ -361,6 +364,7 @@ def _main_job(uniform: bool, steps: int) -> dict[str, float]:
         "step_p90_s": float(np.percentile(walls, 90)),
         "cutting_steps": len(cutting),
         "cutting_median_s": float(np.median(cutting)) if cutting else math.nan,
+        "cutting_effects_median_s": {e: float(np.median(v)) for e, v in effects.items()},
         "first_cut_s": cut_at,
         "cut_m3": r.cut_volume_m3,
         "depth_m": r.crater_depth_m,

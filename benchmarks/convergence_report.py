@@ -383,6 +383,23 @@ def _main_job_lines(results: Path) -> list[str]:
             f"{cut_ratio:.2f}x, total {g['total_s'] / u['total_s']:.2f}x, max RSS "
             f"{g['max_rss_mib'] / u['max_rss_mib']:.2f}x."
         )
+    with_effects = [j for j in jobs if j.get("cutting_effects_median_s")]
+    if with_effects:
+        effs = sorted({e for j in with_effects for e in j["cutting_effects_median_s"]})
+        lines += [
+            "",
+            "Median time of each effect over the cutting steps (s; 0 on a step it skipped):",
+            "",
+            "| grid | " + " | ".join(effs) + " |",
+            "|---|" + "---:|" * len(effs),
+        ]
+        for j in with_effects:
+            med = j["cutting_effects_median_s"]
+            lines.append(
+                f"| {j['grid']}{' graded' if j['graded'] else ''} | "
+                + " | ".join(f"{med.get(e, 0.0):.3f}" for e in effs)
+                + " |"
+            )
     return lines
 
 

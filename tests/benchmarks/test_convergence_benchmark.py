@@ -49,6 +49,8 @@ def test_scene_family(bench: ModuleType) -> None:
     assert fine.electrodes[0].drive == "current_density"
     assert fine.resolution.depth_m == bench.builtin_scene("fixed-electrode").resolution.depth_m
     assert fine.resolution.deep_m is None  # the ladder's grids, whatever the scene ships
+    assert fine.resolution.surface_m is None
+    assert bench.scene_for(0.4, moving=False, surface_mm=0.1).resolution.surface_m == 1e-4
     deep = bench.scene_for(0.8, moving=False, deep_mm=40.0)
     assert deep.resolution.deep_m == pytest.approx(40e-3)
     assert bench.tag_of(0.8, False, deep_mm=40.0) == "fixed_0.8mm_deep40"
@@ -307,3 +309,23 @@ def test_a_cell_height_of_its_own_is_its_own_run(
         ["| fixed_0.8mm_z0.2", "0.8", "0.2"],
     ]
     assert "| 12.00 |" in rows[0] and "| 24.00 |" in rows[1]  # depth at 3 s, mm
+
+
+def test_main_job_reports_each_effect_over_the_cutting_steps(
+    bench: ModuleType, report: ModuleType, tmp_path: Path, monkeypatch
+) -> None:
+    """``main-job``'s record of one grid (a tiny graded scene for ``default``): the cutting
+    steps' median per effect, and the report's table of them."""
+    from diathermy.scene import Resolution
+    from tests.engine.scenes import tiny_scene
+
+    res = Resolution(fine_m=0.5e-3, max_cell_m=2e-3, margin_m=1e-3, depth_m=1.5e-3)
+    monkeypatch.setattr(bench, "builtin_scene", lambda name: tiny_scene(resolution=res))
+    job = bench._main_job(False, 20)
+    assert job["graded"] and job["cutting_steps"] > 0
+    med = job["cutting_effects_median_s"]
+    assert {"electric", "thermal", "mechanics"} <= set(med) and med["mechanics"] > 0
+    (tmp_path / "convergence_main_job.json").write_text(json.dumps([job, job]))
+    text = "\n".join(report._main_job_lines(tmp_path))
+    assert "Median time of each effect over the cutting steps" in text
+    assert f"{med['mechanics']:.3f} |" in text
