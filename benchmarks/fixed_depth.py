@@ -51,7 +51,7 @@ TIMES_S = (1.5, 3.0, 6.0, 9.0, 12.0)
 def scene_for(deep_mm: float, base: str = "fixed-electrode") -> Scene:
     """The built-in scene with a deep tier down to ``deep_mm`` below the top (0: none), its
     region's cells up to the surface (the recorded runs; the scene refines its top cells to
-    0.1 mm since 2026-12-07, which moves the crater by ~1 %: docs/resolution.md)."""
+    0.1 mm since 2026-12-07: +0.5 % crater volume, +3.7 % depth at 1.5 s, docs/resolution.md)."""
     data = builtin_scene(base).model_dump()
     deep = deep_mm * 1e-3 if deep_mm > 0 else None
     data["resolution"] = {**data["resolution"], "deep_m": deep, "surface_m": None}

@@ -10,11 +10,12 @@ iterations at 64x64x128. Build hierarchies on the unit-diagonal scaling D^-1/2 A
 initial and final residuals and their norms: two extra fine-level mat-vecs per application
 (about a quarter of a Chebyshev V-cycle). ``v_cycle_preconditioner`` is the same V-cycle without.
 
-pyamg's default coarse solver, 'pinv', forms a pseudo-inverse by SVD on its first call: 16-140 ms
-for the elasticity hierarchy's 234 coarsest rows on 2 cores, paid again whenever a cut refreshes
-the coarse operators (``galerkin_refresh``), every cutting step. ``coarse_solver("cholesky")``
-factors instead (0.35 ms) and falls back to the pseudo-inverse only where the coarsest operator
-is not numerically positive definite.
+pyamg's default coarse solver, 'pinv', forms a pseudo-inverse by SVD on its first call: ~16 ms
+for the elasticity hierarchy's 234 coarsest rows on one BLAS thread (up to 140 ms with a
+threaded OpenBLAS on 2 busy cores), paid again whenever a cut refreshes the coarse operators
+(``galerkin_refresh``), every cutting step. ``coarse_solver("cholesky")`` factors instead
+(0.35 ms) and falls back to the pseudo-inverse only where the coarsest operator is not
+numerically positive definite.
 """
 
 from __future__ import annotations

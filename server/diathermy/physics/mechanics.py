@@ -54,8 +54,9 @@ DEFAULT_AMG_OPTIONS: dict[str, Any] = {
     "coarse_solver": "cholesky",
 }
 """Smoothed aggregation for the 3x3-block elasticity matrix (measured in benchmarks/mechanics.py).
-The coarsest level is factored (``fem.multigrid.coarse_solver``): pyamg's pseudo-inverse took
-16-140 ms a cutting step on the default graded grid, formed again after every cut."""
+The coarsest level is factored (``fem.multigrid.coarse_solver``): pyamg's pseudo-inverse, formed
+again after every cut, took ~16 ms a cutting step on the default graded grid (up to 140 ms with a
+threaded OpenBLAS), the factor ~0.5 ms."""
 MAX_UPDATED_TETS = 0.05
 """A new topology updates the previous stiffness when at most this fraction of tets changed E
 (a cut step changes a few dozen); above it assembling anew is as cheap."""
