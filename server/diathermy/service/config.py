@@ -31,8 +31,18 @@ class Settings(BaseSettings):
         default=False, description="serve without auth: everyone is 'anonymous'"
     )
 
-    max_grid_nodes: int = Field(default=300_000, ge=27)
-    max_memory_bytes: int = Field(default=4 * 2**30, ge=1)
+    max_grid_nodes: int = Field(
+        default=500_000,
+        ge=27,
+        description="most nodes a session's grid may have; the default admits every built-in "
+        "scene (the largest, fixed-electrode, has 445,900)",
+    )
+    max_memory_bytes: int = Field(
+        default=8 * 2**30,
+        ge=1,
+        description="most memory a session's engine is estimated to need before it allocates; "
+        "the default admits every built-in scene (fixed-electrode: ~7.0 GiB)",
+    )
     max_steps_per_request: int = Field(default=200, ge=1)
     max_sessions_per_token: int = Field(default=8, ge=1)
     max_active_jobs_per_token: int = Field(
