@@ -318,8 +318,7 @@ def profile(a: argparse.Namespace, started: str) -> None:
     for name in a.scenes:
         for grid in a.grids:
             scene = scene_on(name, grid)
-            path, _ = warm_up(scene, CACHE / f"{name}_{grid}.h5", a.warmup)
-            sim = load_as(path)
+            sim = load_as(checkpoint(name, grid, a.warmup))
             prof = cProfile.Profile()
             prof.enable()
             for _ in range(a.steps):

@@ -97,3 +97,27 @@ def test_cholesky_hierarchy_cycles_as_the_pseudo_inverse_one(rng):
     ref = v_cycle_preconditioner(ml_p) @ b
     got = v_cycle_preconditioner(ml_c) @ b
     assert np.linalg.norm(got - ref) <= 1e-10 * np.linalg.norm(ref)
+
+
+def test_the_coarse_factor_runs_on_one_blas_thread_whatever_the_process_set(
+    rng, monkeypatch
+) -> None:
+    """A threaded OpenBLAS took 35-116 ms for a 0.5 ms factor on a busy 2-core machine: the
+    factorization limits itself, even where the caller allowed more threads."""
+    import scipy.linalg as sla
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    import diathermy.fem.multigrid as mg
+
+    seen: list[int] = []
+    factor = sla.cho_factor
+
+    def spy(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        seen.extend(p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas")
+        return factor(*args, **kwargs)
+
+    monkeypatch.setattr(mg.sla, "cho_factor", spy)
+    A = pyamg.gallery.poisson((6, 6), format="csr") + sp.eye(36, format="csr")
+    with threadpool_limits(limits=2, user_api="blas"):
+        CholeskyCoarseSolver()(A, rng.normal(size=36))
+    assert seen and set(seen) == {1}
