@@ -58,6 +58,7 @@ from convergence_report import (  # noqa: E402
     report,
 )
 
+from diathermy.engine.removal import tissue_share  # noqa: E402
 from diathermy.engine.simulation import Simulation  # noqa: E402
 from diathermy.physics.dissection import cut_driver  # noqa: E402
 from diathermy.physics.topology import contact_height  # noqa: E402
@@ -82,6 +83,7 @@ def scene_for(
     depth_mm: float | None = None,
     fine_z_mm: float | None = None,
     deep_mm: float | None = None,
+    removal: str | None = None,
 ) -> Scene:
     """The fixed electrode (current-density drive) with its resolution at ``fine_mm`` (0: uniform
     33x33x65), or the moving electrode as shipped (``fine_mm`` None: its own grid); the cut
@@ -89,8 +91,9 @@ def scene_for(
     the cell height at the top surface at ``surface_mm`` (None or 0: fine_mm up to the surface,
     whatever the fixed scene ships), the
     working region's depth at ``depth_mm`` (None: the scene's), its cell height at
-    ``fine_z_mm`` (None: fine_mm) and a deep tier under it to ``deep_mm`` (None: none, whatever
-    the scene ships, so that the recorded ladder keeps its grids)."""
+    ``fine_z_mm`` (None: fine_mm), a deep tier under it to ``deep_mm`` (None: none, whatever
+    the scene ships, so that the recorded ladder keeps its grids) and the cut's
+    ``level_set.removal`` (None: the scene's)."""
     scene = builtin_scene("moving-electrode" if moving else "fixed-electrode")
     if fine_mm is not None and fine_mm <= 0:
         scene = scene.on_uniform_grid(UNIFORM)
@@ -104,6 +107,8 @@ def scene_for(
         base["level_set"] = {**base["level_set"], "nonlocal_length_m": length_mm * 1e-3}
     if contact is not None:
         base["electrodes"] = [{**e, "contact": contact} for e in base["electrodes"]]
+    if removal is not None:
+        base["level_set"] = {**base["level_set"], "removal": removal}
     if not moving and base.get("resolution") is not None:  # none unless given, as deep_mm
         surface = surface_mm * 1e-3 if surface_mm else None
         base["resolution"] = {**base["resolution"], "surface_m": surface}
@@ -127,10 +132,12 @@ def tag_of(
     depth_mm: float = REGION_DEPTH_MM,
     fine_z_mm: float | None = None,
     deep_mm: float | None = None,
+    removal: str = "threshold",
 ) -> str:
     """The run's file tag: scene, grid, dt if not the default, the non-local length if any, the
     contact model if not flat, the surface cell if refined, the region's depth if not 12 mm, the
-    region's cell height if not the fine spacing, the deep tier's depth if any."""
+    region's cell height if not the fine spacing, the deep tier's depth if any, the removal rule
+    if not the threshold."""
     kind = "moving" if moving else "fixed"
     grid = "default" if fine_mm is None else "uniform" if fine_mm <= 0 else f"{fine_mm:g}mm"
     tag = f"{kind}_{grid}" + ("" if dt_s == DT_S else f"_dt{dt_s:g}")
@@ -139,7 +146,8 @@ def tag_of(
     tag += f"_s{surface_mm:g}" if surface_mm > 0 else ""
     tag += "" if depth_mm in (0.0, REGION_DEPTH_MM) else f"_d{depth_mm:g}"
     tag += "" if fine_z_mm is None or fine_z_mm == fine_mm else f"_z{fine_z_mm:g}"
-    return tag + (f"_deep{deep_mm:g}" if deep_mm else "")
+    tag += f"_deep{deep_mm:g}" if deep_mm else ""
+    return tag + ("" if removal == "threshold" else f"_{removal}")
 
 
 def front_strain_energy(sim: Simulation) -> float:
@@ -156,6 +164,7 @@ def front_strain_energy(sim: Simulation) -> float:
         volumes=sim.disc.geom.volumes,
         incidence=sim.ctx.incidence,
         length_m=sim.scene.level_set.nonlocal_length_m,
+        tissue_share=tissue_share(sim.ctx, sim.state),
     )
     front = sim.state["level_set"] <= 0.0
     return float(W_nodes[front].max()) if front.any() else 0.0
@@ -181,10 +190,12 @@ def run(
     depth_mm: float | None = None,
     fine_z_mm: float | None = None,
     deep_mm: float | None = None,
+    removal: str | None = None,
 ) -> Path:
     scene = scene_for(
         fine_mm, moving=moving, dt_s=dt_s, length_mm=length_mm, contact=contact,
         surface_mm=surface_mm, depth_mm=depth_mm, fine_z_mm=fine_z_mm, deep_mm=deep_mm,
+        removal=removal,
     )  # fmt: skip
     length_mm = scene.level_set.nonlocal_length_m * 1e3
     contact = scene.electrodes[0].contact
@@ -237,6 +248,7 @@ def run(
     tag = tag_of(
         fine_mm, moving, dt_s, length_mm, contact, surface_mm,
         REGION_DEPTH_MM if depth_mm is None else depth_mm, fine_z_mm, deep_mm,
+        scene.level_set.removal,
     )  # fmt: skip
     out = RESULTS / f"convergence_{tag}.npz"
     arrays: dict[str, Any] = {**{k: np.asarray(v) for k, v in rec.items()}, **profiles}
@@ -258,6 +270,7 @@ def run(
         length_mm=length_mm,
         contact=contact,
         surface_mm=surface_mm,
+        removal=scene.level_set.removal,
     )
     print(f"{out.name}: {len(rec['time_s'])} steps to t = {rec['time_s'][-1]:.2f} s")
     return out
@@ -472,6 +485,11 @@ def main(argv: list[str] | None = None) -> int:
         help="a deep tier under the working region down to this depth (resolution.deep_m; "
         "default: none, whatever the scene ships)",
     )
+    r.add_argument(
+        "--removal",
+        choices=("threshold", "fraction"),
+        help="the cut's level_set.removal (default: the scene's)",
+    )
     pw = sub.add_parser("power")
     pw.add_argument("--fine-mm", type=float, nargs="+", required=True)
     mj = sub.add_parser("main-job")
@@ -503,6 +521,7 @@ def main(argv: list[str] | None = None) -> int:
             depth_mm=a.depth_mm,
             fine_z_mm=a.fine_z_mm,
             deep_mm=a.deep_mm,
+            removal=a.removal,
         )
     elif a.cmd == "cost":
         surface_cost(a.fine_mm, a.surface_mm, a.warm, a.steps, a.deep_mm)

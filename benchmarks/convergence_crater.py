@@ -28,6 +28,7 @@ from convergence_runs import (
     length_mm,
     observed_order,
     region_mm,
+    removal,
     summary,
 )
 
@@ -129,15 +130,17 @@ def variant_lines(runs: dict[str, dict[str, np.ndarray]], keys: list[str]) -> li
     lines = [
         "",
         "Model variants against the shipped model on the same grid: the non-local cut driver "
-        "(`level_set.nonlocal_length_m` = l; W averaged over l before it drives the front) and "
+        "(`level_set.nonlocal_length_m` = l; W averaged over l before it drives the front), "
         "the draped contact (`electrodes[].contact` = draped: the disk follows the crater's "
-        "surface under each of its points). Compared at each run's end that the others reach "
+        "surface under each of its points) and the removal by fraction "
+        "(`level_set.removal` = fraction: a partly cut tet's properties blend by the tissue "
+        "left in it). Compared at each run's end that the others reach "
         "too; a run that stopped earlier (its wall limit) shows -.",
         "",
-        "| grid | l mm | contact | t end s | first cut interp. s | "
+        "| grid | l mm | contact | removal | t end s | first cut interp. s | "
         + " | ".join(f"cut {t:.2f} s mm^3 | depth {t:.2f} s mm | / shipped" for t in ends)
         + " | deepening rate mm/s |",
-        "|---|---:|---|---:|---:|" + "---:|---:|---:|" * len(ends) + "---:|",
+        "|---|---:|---|---|---:|---:|" + "---:|---:|---:|" * len(ends) + "---:|",
     ]
     for k in keys:
         d = runs[k]
@@ -156,6 +159,7 @@ def variant_lines(runs: dict[str, dict[str, np.ndarray]], keys: list[str]) -> li
             )
         lines.append(
             f"| {float(d['fine_mm']):g} mm | {length_mm(d):g} | {contact_model(d)} | "
+            f"{removal(d)} | "
             f"{float(d['time_s'][-1]):.2f} | {fmt(s['cut_interp'], 1.0, 3)} | "
             + " | ".join(cells)
             + f" | {fmt(drilling_rate(d), 1e3)} |"

@@ -38,6 +38,7 @@ from convergence_runs import (
     grid_label,
     length_mm,
     observed_order,
+    removal,
     standard_depth,
     summary,
     surface_mm,
@@ -445,6 +446,7 @@ def report() -> None:
         if k.startswith("fixed")
         and length_mm(runs[k]) == 0.0
         and contact_model(runs[k]) == "flat"
+        and removal(runs[k]) == "threshold"
         and surface_mm(runs[k]) == 0.0
     ]
     fixed = sorted(
@@ -457,7 +459,11 @@ def report() -> None:
             k
             for k in runs
             if k.startswith("fixed")
-            and (length_mm(runs[k]) > 0.0 or contact_model(runs[k]) != "flat")
+            and (
+                length_mm(runs[k]) > 0.0
+                or contact_model(runs[k]) != "flat"
+                or removal(runs[k]) != "threshold"
+            )
             and surface_mm(runs[k]) == 0.0
         ),
         key=lambda k: (-float(runs[k]["fine_mm"]), length_mm(runs[k])),
@@ -469,6 +475,7 @@ def report() -> None:
         and surface_mm(runs[k]) > 0.0
         and contact_model(runs[k]) == "flat"
         and length_mm(runs[k]) == 0.0
+        and removal(runs[k]) == "threshold"
         and float(runs[k]["dt_s"]) == DT_S
     ]
     moving = sorted(k for k in runs if k.startswith("moving"))

@@ -128,6 +128,11 @@ def contact_model(d: dict[str, np.ndarray]) -> str:
     return str(d["contact"]) if "contact" in d else "flat"
 
 
+def removal(d: dict[str, np.ndarray]) -> str:
+    """The run's ``level_set.removal`` ('threshold' for older runs)."""
+    return str(d["removal"]) if "removal" in d else "threshold"
+
+
 def surface_mm(d: dict[str, np.ndarray]) -> float:
     """The run's cell height at the top surface in mm (0: the fine spacing, older runs)."""
     return float(d["surface_mm"]) if "surface_mm" in d else 0.0

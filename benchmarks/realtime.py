@@ -112,9 +112,14 @@ def checkpoint(name: str, grid: str, warmup: int) -> Path:
     return warm_up(scene_on(name, grid), CACHE / f"{name}_{grid}.h5", warmup)[0]
 
 
-def scene_on(name: str, grid: str) -> Scene:
-    """Built-in scene ``name`` on its own graded grid or on the uniform 33x33x65."""
+def scene_on(name: str, grid: str, removal: str = "threshold") -> Scene:
+    """Built-in scene ``name`` on its own graded grid or on the uniform 33x33x65, with the cut's
+    ``level_set.removal`` (every mode of a run steps the same scene)."""
     scene = builtin_scene(name)
+    if removal != scene.level_set.removal:
+        scene = scene.model_copy(
+            update={"level_set": scene.level_set.model_copy(update={"removal": removal})}
+        )
     return scene if grid == "own" else scene.on_uniform_grid(UNIFORM)
 
 
@@ -349,10 +354,11 @@ def profile(a: argparse.Namespace, started: str) -> None:
 
 
 def start_suffix(a: argparse.Namespace) -> str:
-    """The checkpoint name's tail for ``a``'s starting point (one file per start)."""
+    """The checkpoint name's tail for ``a``'s starting point and removal (one file each)."""
+    removal = "" if a.removal == "threshold" else f"_{a.removal}"
     if a.from_start:
-        return "_start"
-    return "" if a.from_step is None else f"_step{a.from_step}"
+        return f"{removal}_start"
+    return removal if a.from_step is None else f"{removal}_step{a.from_step}"
 
 
 def run_args(a: argparse.Namespace, scene: str, grid: str, out: Path) -> list[str]:
@@ -366,6 +372,8 @@ def run_args(a: argparse.Namespace, scene: str, grid: str, out: Path) -> list[st
         args += ["--from-step", str(a.from_step)]
     if a.tight:
         args.append("--tight")
+    if a.removal != "threshold":
+        args += ["--removal", a.removal]
     if a.tolerances:
         args += ["--tolerances", *map(repr, a.tolerances)]
     for v in a.variant:
@@ -437,6 +445,12 @@ def parser() -> argparse.ArgumentParser:
             "'solver.electric_energy_tolerance=1e-4, mechanics.energy_tolerance=0.01' "
             "(repeatable)",
         )
+        r.add_argument(
+            "--removal",
+            choices=("threshold", "fraction"),
+            default="threshold",
+            help="run: the scenes' level_set.removal, for every mode",
+        )
         start = r.add_mutually_exclusive_group()
         start.add_argument(
             "--from-start",
@@ -479,7 +493,7 @@ def main() -> None:
             return
         runs = {
             (n, g): measure(
-                scene_on(n, g),
+                scene_on(n, g, a.removal),
                 CACHE / f"{n}_{g}{start_suffix(a)}.h5",
                 warmup=a.warmup,
                 steps=a.steps,

@@ -63,6 +63,11 @@ def test_scene_family(bench: ModuleType) -> None:
     assert bench.tag_of(0.4, False, contact="draped") == "fixed_0.4mm_draped"
     draped = bench.scene_for(0.4, moving=False, contact="draped")
     assert draped.electrodes[0].contact == "draped"
+    fraction = bench.scene_for(0.4, moving=False, removal="fraction")
+    assert fraction.level_set.removal == "fraction"
+    assert bench.scene_for(0.4, moving=False).level_set.removal == "threshold"
+    assert bench.tag_of(0.4, False, removal="fraction") == "fixed_0.4mm_fraction"
+    assert bench.tag_of(0.4, False, removal="threshold") == "fixed_0.4mm"
 
 
 def test_run_then_report(
@@ -90,20 +95,25 @@ def test_drilling_rate_is_the_depth_slope(saved: ModuleType) -> None:
 def test_nonlocal_run_and_probe_then_report(
     bench: ModuleType, report: ModuleType, tmp_path: Path, monkeypatch
 ) -> None:
-    """A non-local run lands in its own table beside the local run of its grid, not in the
-    ladder; the floor probe's JSON becomes the table under the contact."""
+    """A non-local run and a removal-by-fraction run land in their own table beside the local,
+    threshold run of their grid, not in the ladder; the floor probe's JSON becomes the table
+    under the contact."""
     monkeypatch.setattr(bench, "RESULTS", tmp_path)
     monkeypatch.setattr(report, "RESULTS", tmp_path)
     bench.run(4.0, moving=False, seconds=0.09, wall_limit=60.0)
     out = bench.run(4.0, moving=False, seconds=0.09, wall_limit=60.0, length_mm=2.0)
     assert out.name == "convergence_fixed_4mm_l2.npz" and float(np.load(out)["length_mm"]) == 2.0
+    out = bench.run(4.0, moving=False, seconds=0.09, wall_limit=60.0, removal="fraction")
+    assert out.name == "convergence_fixed_4mm_fraction.npz"
+    assert str(np.load(out)["removal"]) == "fraction"
     probe = bench.floor_probe(4.0, 3)
     records = json.loads(probe.read_text())["4"]
     assert len(records) == 3 and records[-1]["floor_t_k"] > 310.0
     report.report()
     text = (tmp_path / "convergence.md").read_text()
-    assert "| 4 mm | 2 | flat |" in text  # the variants' table
-    assert "4mm_l2 (" not in text  # not a row of the ladder
+    assert "| 4 mm | 2 | flat | threshold |" in text  # the variants' table
+    assert "| 4 mm | 0 | flat | fraction |" in text
+    assert "4mm_l2 (" not in text and "4mm_fraction (" not in text  # not rows of the ladder
 
 
 def test_ladder_compares_each_contact_at_the_finest_draped_end(
@@ -128,10 +138,14 @@ def test_ladder_compares_each_contact_at_the_finest_draped_end(
         "fixed_0.2mm": run(0.2, 1.0, t_long, "flat"),
         "fixed_0.4mm_draped": run(0.4, 0.9, t_long, "draped"),
         "fixed_0.2mm_draped": run(0.2, 1.0, t_short, "draped"),
+        "fixed_0.4mm_fraction": run(0.4, 0.7, t_long, "flat") | {"removal": np.array("fraction")},
     }
-    text = "\n".join(crater.variant_lines(runs, ["fixed_0.4mm_draped", "fixed_0.2mm_draped"]))
+    keys = ["fixed_0.4mm_draped", "fixed_0.2mm_draped", "fixed_0.4mm_fraction"]
+    text = "\n".join(crater.variant_lines(runs, keys))
     assert "cut 0.50 s mm^3" in text and "cut 1.00 s mm^3" in text
-    assert "| 0.2 mm | 0 | draped | 0.50 |" in text and "| - | - | - |" in text
+    assert "| 0.2 mm | 0 | draped | threshold | 0.50 |" in text and "| - | - | - |" in text
+    # the removal variant beside the threshold run of its grid: 0.7 / 0.8 of its cut
+    assert "| 0.4 mm | 0 | flat | fraction | 1.00 | 0.050 | 0.35 | 0.35 | 0.875 |" in text
     assert (
         "draped contact at t = 0.50 s, cut volume / depth against its 0.2 mm run: 0.4 mm 0.90 / 0.90"
         in text

@@ -117,6 +117,13 @@ def test_each_scene_and_grid_runs_in_a_process_of_its_own(bench: ModuleType) -> 
     plain = bench.parser().parse_args(["run", "--scenes", "default"])
     child = bench.parser().parse_args(bench.run_args(plain, "default", "own", Path("y")))
     assert not child.from_start and not child.tight and child.tolerances == [] == child.variant
+    assert child.removal == "threshold" and bench.start_suffix(child) == ""
+    # the removal rule goes to the child, and to the checkpoint's name (a scene of its own)
+    a = bench.parser().parse_args(["run", "--removal", "fraction", "--from-start"])
+    child = bench.parser().parse_args(bench.run_args(a, "default", "own", Path("z")))
+    assert child.removal == "fraction" and bench.start_suffix(child) == "_fraction_start"
+    assert bench.scene_on("default", "own", "fraction").level_set.removal == "fraction"
+    assert bench.scene_on("default", "uniform").level_set.removal == "threshold"
 
 
 def test_a_negative_start_step_is_refused(

@@ -27,6 +27,7 @@ from diathermy.engine.effects.electric import conductivity
 from diathermy.engine.effects.mechanics import load_key
 from diathermy.engine.electrodes import ElectrodeOverride
 from diathermy.engine.ledger import EnergyLedger
+from diathermy.engine.removal import tissue_share
 from diathermy.engine.state import SimulationState
 from diathermy.errors import CheckpointError, MeshError, SceneError
 from diathermy.fem.solvers import ReuseState
@@ -249,10 +250,15 @@ def _restore_hierarchies(ctx: EngineContext, solver: dict[str, np.ndarray]) -> N
         fem.restore_hierarchy(
             HierarchyOrigin(
                 solver["mechanics_hierarchy_E"],
-                solver["mechanics_hierarchy_healthy"].astype(bool),
+                _healthy_or_share(solver["mechanics_hierarchy_healthy"]),
                 _reuse_state(solver["mechanics_hierarchy_reuse"]),
             )
         )
+
+
+def _healthy_or_share(saved: np.ndarray) -> np.ndarray:
+    """The saved healthy mask, or the tissue shares a 'fraction' run saved (floats in [0, 1])."""
+    return saved.astype(bool) if saved.dtype.kind in "biu" else saved.astype(float)
 
 
 def restore_solver_state(
@@ -271,7 +277,7 @@ def restore_solver_state(
         memory.topology = evaluate_topology(
             state["level_set"], ctx.disc.mesh, ctx.disc.geom.volumes
         )
-    memory.mechanics_key = load_key(state) if mechanics_current else None
+    memory.mechanics_key = load_key(state, tissue_share(ctx, state)) if mechanics_current else None
     _restore_hierarchies(ctx, solver)
     if "potential_warm_start" in solver:
         ctx.potential.solver.krylov.warm_start = solver["potential_warm_start"]

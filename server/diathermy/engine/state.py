@@ -33,14 +33,14 @@ class EffectMemory:
     """What effects carry from one step to the next besides the fields.
 
     steps_since_reinit: dissection steps since the level set was last re-initialised.
-    mechanics_key: the (pressure, removed) bytes the displacement was solved for, None when u
-        is not the solution of the current state.
+    mechanics_key: the (pressure, removed, tissue share) bytes the displacement was solved for,
+        None when u is not the solution of the current state.
     topology: the last topology the dissection evaluated (removed and loose tets, crater).
     contacts: the contact disks the electric effect used last step (empty: none).
     """
 
     steps_since_reinit: int = 0
-    mechanics_key: tuple[bytes, bytes] | None = None
+    mechanics_key: tuple[bytes, bytes, bytes] | None = None
     topology: Topology | None = None
     contacts: tuple[ContactKey, ...] = ()
 

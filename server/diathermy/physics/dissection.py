@@ -54,14 +54,17 @@ def cut_driver(
     volumes: np.ndarray,
     incidence: sp.csr_matrix | None,
     length_m: float,
+    tissue_share: np.ndarray | None = None,
 ) -> np.ndarray:
     """The nodal strain energy (n_nodes,) in J/m^3 that drives the front: the volume-weighted
     mean over the healthy tets around each node, averaged over the material length ``length_m``
     (m) when it is positive (``nonlocal_average``), else the local mean itself.
 
     Removed tets carry ~0 W: they are left out so that they do not dilute W on the cut surface.
+    ``tissue_share`` (n_tets,) in [0, 1] ('fraction' removal) weights each tet by the tissue left
+    in it instead.
     """
-    include = ~np.asarray(removed, dtype=bool)
+    include = ~np.asarray(removed, dtype=bool) if tissue_share is None else tissue_share
     W_nodes = tet_to_node(
         strain_energy, mesh.tets, volumes, mesh.n_nodes, include=include, incidence=incidence
     )
@@ -87,11 +90,13 @@ def dissection_step(
     dt: float,
     steps_since_reinit: int,
     previous: Topology | None,
+    tissue_share: np.ndarray | None = None,
 ) -> DissectionStep:
     """Advance the cut one step dt (s) under the strain energy per tet (J/m^3).
 
     The front is driven by ``cut_driver`` (the law's non-local length). ``previous`` is the
-    last topology (its loose fragments are reused when the removed mask is unchanged).
+    last topology (its loose fragments are reused when the removed mask is unchanged);
+    ``tissue_share``: see ``cut_driver``.
     """
     W_nodes = cut_driver(
         strain_energy,
@@ -101,6 +106,7 @@ def dissection_step(
         volumes=volumes,
         incidence=incidence,
         length_m=law.nonlocal_length_m,
+        tissue_share=tissue_share,
     )
     F = front_speed(W_nodes, law.kappa_j_per_m3, law.v0_m_per_s)
     adv = advance(level_set.reshape(grid.shape), F, grid_spacing(grid), dt, cfl=law.cfl)

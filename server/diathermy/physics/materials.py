@@ -89,5 +89,21 @@ def ersatz_youngs_modulus(
     """E per tet in Pa: the tissue's where healthy, the ersatz ratio E of removed tissue elsewhere.
 
     The one place of the ersatz-material rule (removed tets stay in the mesh, nearly void).
+    ``healthy``: a mask (n_tets,), or each tet's tissue share in [0, 1] (``level_set.removal``
+    'fraction'), which blends the two moduli (``share_blend``).
     """
-    return np.where(healthy, youngs_modulus_pa, ersatz_ratio * youngs_modulus_pa)
+    h = np.asarray(healthy)
+    if h.dtype != bool:
+        return share_blend(h, youngs_modulus_pa, ersatz_ratio * youngs_modulus_pa)
+    return np.where(h, youngs_modulus_pa, ersatz_ratio * youngs_modulus_pa)
+
+
+def share_blend(
+    share: np.ndarray, tissue_value: np.ndarray | float, removed_value: np.ndarray | float
+) -> np.ndarray:
+    """A property per tet (n_tets,) of tets that are partly cut: share x the tissue's value +
+    (1 - share) x the removed tissue's, with ``share`` (n_tets,) in [0, 1] the tissue left in
+    each (``topology.tissue_share``). The rule of ``level_set.removal`` 'fraction': properties
+    continuous in the level set, where the half-volume threshold switches them in one step."""
+    s = np.asarray(share, dtype=float)
+    return s * tissue_value + (1.0 - s) * removed_value

@@ -102,7 +102,9 @@ class MechanicsSolver:
         poisson_ratio: nu in (-1, 0.5); up to 0.49 is tested.
         constraints: prescribed DOFs; default ``clamped_bottom(mesh)``.
         healthy: bool (n_tets,) tissue that carries stiffness and pore pressure; default
-            E >= 1e-3 max E (the ersatz level is 1e-6 E).
+            E >= 1e-3 max E (the ersatz level is 1e-6 E). Or each tet's share of tissue in
+            [0, 1] (``level_set.removal`` 'fraction'): the pore pressure's load is weighted by
+            it, and the tets more than half tissue are the healthy ones.
         ersatz_ratio: modulus of removed (loose) tissue relative to max E.
         loose_fragments: "remove" (default) or "keep"; see the module docstring.
         rtol, maxiter, amg_options: for the AMG-preconditioned CG.
@@ -152,7 +154,11 @@ class MechanicsSolver:
             raise SceneError("Young's modulus must be positive and finite in every tet")
         if healthy is None:
             healthy = E >= 1e-3 * E.max()
-        healthy = np.asarray(healthy, dtype=bool)
+        given = np.asarray(healthy)
+        # a share of tissue per tet ('fraction' removal) weights the pore pressure; the tets more
+        # than half tissue are the healthy ones of the fragment search
+        share = None if given.dtype == bool else np.clip(given.astype(float), 0.0, 1.0)
+        healthy = np.asarray(healthy, dtype=bool) if share is None else share > 0.5
         if base is not None and not base.updatable_to(self):
             base = None
         # the mesh's rigid-body modes (3 n_nodes, 6), from the base when there is one
@@ -178,6 +184,10 @@ class MechanicsSolver:
             raise ValueError(f"loose_fragments must be 'remove' or 'keep', got {loose_fragments!r}")
         self.youngs_modulus_pa = E
         self.healthy = healthy
+        # what carries pore pressure: the healthy mask, or the shares with loose fragments at 0
+        self.load_weight = healthy if share is None else share
+        if share is not None and loose_fragments == "remove":
+            self.load_weight[self.fragments.loose] = 0.0
         update = None if base is None else base.updated_stiffness(E, in_place=consume_base)
         self.updated = update is not None
         K, changed_blocks = update if update is not None else (None, None)
@@ -306,7 +316,7 @@ class MechanicsSolver:
             self.mesh.tets,
             self.mesh.n_nodes,
             dp,
-            self.healthy,
+            self.load_weight,
             touching=self.mesh.tets_touching(np.flatnonzero(dp)),
         ).ravel()
         if self._lift is not None:

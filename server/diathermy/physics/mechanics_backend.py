@@ -68,7 +68,8 @@ class MechanicsBackend(Protocol):
 @dataclass(frozen=True)
 class HierarchyOrigin:
     """The topology the mechanics AMG hierarchy was built for: E per tet (Pa) and the healthy
-    mask of that solve (loose fragments removed), with the reuse counters since; a checkpoint
+    mask of that solve (loose fragments removed; the tissue shares under 'fraction' removal),
+    with the reuse counters since; a checkpoint
     saves it so that a restored run rebuilds the very same preconditioner."""
 
     youngs_modulus_pa: np.ndarray
@@ -129,7 +130,7 @@ class FEMBackend:
         solver, _ = self.operator_for(origin.youngs_modulus_pa, origin.healthy)
         self._krylov.build()
         self._krylov.reuse = origin.reuse
-        self._origin = (solver.youngs_modulus_pa.copy(), solver.healthy.copy())
+        self._origin = (solver.youngs_modulus_pa.copy(), solver.load_weight.copy())
 
     @property
     def krylov(self) -> KrylovSolver:
@@ -197,7 +198,7 @@ class FEMBackend:
         res = solver.solve(pressure_pa, self.p0_pa, x0=warm_start)
         self.n_solves += 1
         if res.stats.rebuilt:
-            self._origin = (solver.youngs_modulus_pa.copy(), solver.healthy.copy())
+            self._origin = (solver.youngs_modulus_pa.copy(), solver.load_weight.copy())
         loose = solver.fragments.loose
         return MechanicsOutput(
             u=res.u,
@@ -222,6 +223,7 @@ def solve_with_cut(
     removed: np.ndarray,
     warm_start: np.ndarray | None,
     tissue: Tissue,
+    tissue_share: np.ndarray | None = None,
     grads: np.ndarray,
     tets: np.ndarray,
     previous_W: np.ndarray | None = None,
@@ -234,13 +236,17 @@ def solve_with_cut(
     ``previous_W`` (n_tets,) is the strain energy of the warm start: when the backend says u is
     alpha x the warm start but on a few nodes (``MechanicsOutput.rescaled``), W is alpha^2 x it
     except on the tets of those nodes and the tets whose E changed, which are recomputed.
-    ``grid``: the grid whose Kuhn mesh ``tets`` is, for a faster W of the whole mesh."""
-    E = ersatz_youngs_modulus(~removed, tissue.youngs_modulus_pa, tissue.ersatz_stiffness_ratio)
+    ``grid``: the grid whose Kuhn mesh ``tets`` is, for a faster W of the whole mesh.
+    ``tissue_share``: each tet's share (n_tets,) in [0, 1] still tissue (``level_set.removal``
+    'fraction'): E and the pore pressure's load are blended by it instead of switched by
+    ``removed``."""
+    healthy = ~removed if tissue_share is None else tissue_share
+    E = ersatz_youngs_modulus(healthy, tissue.youngs_modulus_pa, tissue.ersatz_stiffness_ratio)
     out = backend.solve(
         pressure_pa=pressure_pa,
         level_set_m=level_set_m,
         youngs_modulus_pa=E,
-        healthy=~removed,
+        healthy=healthy,
         warm_start=warm_start,
     )
     E_eff = E.copy()

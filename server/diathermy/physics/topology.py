@@ -256,6 +256,15 @@ class Topology:
     crater_depth_m: float
 
 
+def tissue_share(topology: Topology) -> np.ndarray:
+    """Share (n_tets,) in [0, 1] of each tet that is still tissue: 1 - its removed fraction,
+    0 in a loose fragment. Continuous in phi (the fraction is), where the removed mask jumps at
+    ``REMOVED_FRACTION``; the properties of ``level_set.removal`` 'fraction' blend by it."""
+    share = 1.0 - topology.fraction
+    share[topology.loose] = 0.0
+    return share
+
+
 def evaluate_topology(
     phi_nodes: np.ndarray, mesh: TetMesh, volumes: np.ndarray, previous: Topology | None = None
 ) -> Topology:

@@ -264,6 +264,13 @@ class LevelSetConfig(_Model):
         description="material length l (m) over which the strain energy that drives the cut is "
         "averaged (Gaussian, healthy tissue only); 0 is the local law",
     )
+    removal: Literal["threshold", "fraction"] = Field(
+        "threshold",
+        description="how cut tissue enters conductivity, heat conduction, stiffness, pore "
+        "pressure and the cut's driver: 'threshold' switches a tet to removed tissue once half "
+        "its volume is cut; 'fraction' blends each tet's properties by the share still tissue, "
+        "so the fields are continuous in the level set",
+    )
 
     def law(self, kappa_j_per_m3: float) -> LevelSetLaw:
         """The law these settings give with the tissue's damage threshold kappa (J/m^3)."""

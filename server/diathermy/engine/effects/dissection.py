@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from diathermy.engine.context import EngineContext
+from diathermy.engine.removal import tissue_share
 from diathermy.engine.report import EffectReport
 from diathermy.engine.state import SimulationState
 from diathermy.engine.step import Outcome, Step, skipped
@@ -36,6 +37,7 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
         dt=step.dt,
         steps_since_reinit=state.memory.steps_since_reinit,
         previous=state.memory.topology,
+        tissue_share=tissue_share(ctx, state),
     )
     changed = int(np.count_nonzero(res.removed != state["removed"]))
     return Outcome(

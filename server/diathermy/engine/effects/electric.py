@@ -13,6 +13,7 @@ import numpy as np
 from diathermy.engine.contact import combined, contact_key, drives_current
 from diathermy.engine.context import EngineContext
 from diathermy.engine.electrodes import ElectrodePose
+from diathermy.engine.removal import tissue_share
 from diathermy.engine.report import EffectReport
 from diathermy.engine.state import ContactKey, SimulationState
 from diathermy.engine.step import MonolithicRequest, Outcome, Step
@@ -20,6 +21,7 @@ from diathermy.mesh.kuhn_fields import tet_mean
 from diathermy.physics.contact_load import ContactWeights
 from diathermy.physics.driven_potential import voltage_limited
 from diathermy.physics.electric import joule_heat
+from diathermy.physics.materials import share_blend
 from diathermy.physics.tissue_effects import electrical_conductivity
 
 NO_CONTACT = (
@@ -29,7 +31,8 @@ NO_CONTACT = (
 
 
 def conductivity(ctx: EngineContext, state: SimulationState) -> np.ndarray:
-    """sigma per tet in S/m: the tissue's (or desiccation's law of T and x), removed tets ~0."""
+    """sigma per tet in S/m: the tissue's (or desiccation's law of T and x), removed tets ~0
+    (blended by each tet's tissue share under ``level_set.removal`` 'fraction')."""
     t = ctx.tissue
     if ctx.has("desiccation"):
         sigma_n = electrical_conductivity(
@@ -38,6 +41,9 @@ def conductivity(ctx: EngineContext, state: SimulationState) -> np.ndarray:
         sigma = tet_mean(sigma_n, ctx.disc.grid)
     else:
         sigma = np.full(ctx.disc.n_tets, t.sigma_s_per_m)
+    share = tissue_share(ctx, state)
+    if share is not None:
+        return share_blend(share, sigma, t.sigma_removed_s_per_m)
     sigma[state["removed"]] = t.sigma_removed_s_per_m
     return sigma
 

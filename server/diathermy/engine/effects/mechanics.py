@@ -11,15 +11,21 @@ from typing import Any
 import numpy as np
 
 from diathermy.engine.context import EngineContext
+from diathermy.engine.removal import tissue_share
 from diathermy.engine.report import EffectReport
 from diathermy.engine.state import SimulationState
 from diathermy.engine.step import Outcome, Step
 from diathermy.physics.mechanics_backend import solve_with_cut
 
 
-def load_key(state: SimulationState) -> tuple[bytes, bytes]:
-    """What the displacement depends on: the pressure and the removed mask, as bytes."""
-    return (state["pressure"].tobytes(), state["removed"].tobytes())
+def load_key(state: SimulationState, share: np.ndarray | None) -> tuple[bytes, bytes, bytes]:
+    """What the displacement depends on: the pressure, the removed mask and the tissue shares
+    (``removal.tissue_share``; None under 'threshold' removal), as bytes."""
+    return (
+        state["pressure"].tobytes(),
+        state["removed"].tobytes(),
+        b"" if share is None else share.tobytes(),
+    )
 
 
 def skip(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome | None:
@@ -33,7 +39,7 @@ def skip(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome | No
             },
             memory={"mechanics_key": None},
         )
-    if load_key(state) == state.memory.mechanics_key:
+    if load_key(state, tissue_share(ctx, state)) == state.memory.mechanics_key:
         return Outcome(EffectReport(False, "pressure and topology unchanged: displacement reused"))
     return None
 
@@ -59,11 +65,13 @@ def mode_of(backend: str, extra: dict[str, Any]) -> dict[str, str]:
 def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
     """Solve the displacement with the scene's backend (removed tissue as ersatz material)."""
     backend = ctx.mechanics
+    share = tissue_share(ctx, state)
     out, W = solve_with_cut(
         backend,
         pressure_pa=state["pressure"],
         level_set_m=state["level_set"],
         removed=state["removed"],
+        tissue_share=share,
         warm_start=state["displacement"],
         tissue=ctx.tissue,
         grads=ctx.disc.geom.grads,
@@ -84,5 +92,5 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
             },
         ),
         fields={"displacement": out.u, "strain_energy": W},
-        memory={"mechanics_key": load_key(state)},
+        memory={"mechanics_key": load_key(state, share)},
     )

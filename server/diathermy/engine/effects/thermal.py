@@ -10,10 +10,12 @@ from __future__ import annotations
 import numpy as np
 
 from diathermy.engine.context import EngineContext
+from diathermy.engine.removal import tissue_share
 from diathermy.engine.report import EffectReport
 from diathermy.engine.state import SimulationState
 from diathermy.engine.step import Outcome, Step, skipped
 from diathermy.mesh.kuhn_fields import tet_mean
+from diathermy.physics.materials import share_blend
 from diathermy.physics.properties import effective_conductivity, volumetric_heat_capacity
 
 
@@ -33,7 +35,11 @@ def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
         k = tet_mean(effective_conductivity(x, t), ctx.disc.grid)
     else:  # no vapor yet: the liquid-phase mixture everywhere
         k = np.full(ctx.disc.n_tets, float(effective_conductivity(0.0, t)))
-    k[state["removed"]] = t.k_vapor_w_per_m_k
+    share = tissue_share(ctx, state)
+    if share is not None:
+        k = share_blend(share, k, t.k_vapor_w_per_m_k)
+    else:
+        k[state["removed"]] = t.k_vapor_w_per_m_k
     if step.monolithic is not None:
         req = step.monolithic
         mono = ctx.coupled.monolithic_step(

@@ -1,0 +1,62 @@
+"""The engine under ``level_set.removal`` 'fraction' (each tet's properties blended by its tissue
+share): it cuts, closes its energy balance, blends the conductivity of partly cut tets and
+restores bit for bit; the removed mask, the cut volume and the stream stay what they were."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from diathermy.engine.effects.electric import conductivity
+from diathermy.engine.simulation import Simulation
+from diathermy.physics.topology import tissue_share
+from tests.engine.test_graded_engine import graded_scene
+
+FRACTION = {"removal": "fraction"}
+
+
+def test_a_fraction_run_cuts_balances_energy_and_blends_partly_cut_tets():
+    sim = Simulation(graded_scene(level_set=FRACTION))
+    reports = sim.run(25)
+    cut = [r.cut_volume_m3 for r in reports]
+    assert cut[-1] > 0 and all(b >= a for a, b in zip(cut, cut[1:], strict=False))
+    e = reports[-1].energy
+    assert abs(e["imbalance"]) <= 1e-3 * e["joule_in"]
+    topo = sim.topology
+    assert topo is not None
+    share = tissue_share(topo)
+    partial = (share > 0) & (share < 1)
+    assert partial.any()
+    sigma = conductivity(sim.ctx, sim.state)
+    t = sim.ctx.tissue
+    whole = share == 1
+    # a partly cut tet conducts between removed tissue and the tissue's own (its share's blend)
+    assert np.all(sigma[partial] > t.sigma_removed_s_per_m)
+    assert np.all(sigma[partial] < sigma[whole].max())
+    assert np.all(sigma[share == 0] == t.sigma_removed_s_per_m)
+
+
+def test_a_fraction_run_differs_from_a_threshold_run_only_once_tets_are_partly_cut():
+    """Before the cut the two removal rules are one model: the same fields to the bit."""
+    thr = Simulation(graded_scene())
+    frac = Simulation(graded_scene(level_set=FRACTION))
+    for _ in range(25):
+        thr.step()
+        frac.step()
+        if thr.topology is not None and thr.topology.cut_volume_m3 > 0:
+            break
+        for name, arr in thr.state.arrays.items():
+            assert np.array_equal(arr, frac.state.arrays[name]), name
+    else:
+        raise AssertionError("the tiny graded scene did not cut in 25 steps")
+
+
+def test_a_fraction_checkpoint_restores_bit_for_bit(tmp_path):
+    sim = Simulation(graded_scene(level_set=FRACTION))
+    sim.run(12)
+    path = sim.save_checkpoint(tmp_path / "c.h5")
+    sim.run(5)
+    back = Simulation.load_checkpoint(path)
+    assert back.scene.level_set.removal == "fraction"
+    back.run(5)
+    for name, arr in sim.state.arrays.items():
+        assert np.array_equal(arr, back.state.arrays[name]), name
