@@ -31,6 +31,8 @@ def command_line(a: argparse.Namespace) -> str:
         parts.append(f"--from-step {a.from_step}")
     if a.tight:
         parts.append("--tight")
+    if getattr(a, "removal", "threshold") != "threshold":
+        parts.append(f"--removal {a.removal}")
     if a.tolerances:
         parts.append("--tolerances " + " ".join(f"{t:g}" for t in a.tolerances))
     parts += [f"--variant '{v}'" for v in getattr(a, "variant", [])]

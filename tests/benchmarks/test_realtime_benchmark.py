@@ -126,6 +126,14 @@ def test_each_scene_and_grid_runs_in_a_process_of_its_own(bench: ModuleType) -> 
     assert bench.scene_on("default", "uniform").level_set.removal == "threshold"
 
 
+def test_the_table_names_the_removal_rule_it_ran(bench: ModuleType, report: ModuleType) -> None:
+    """A run under ``--removal fraction`` says so in the command its table records."""
+    a = bench.parser().parse_args(["run", "--scenes", "default", "--removal", "fraction"])
+    assert report.command_line(a).endswith("--steps 8 --removal fraction")
+    plain = bench.parser().parse_args(["run", "--scenes", "default"])
+    assert "--removal" not in report.command_line(plain)
+
+
 def test_a_negative_start_step_is_refused(
     bench: ModuleType, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
