@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 from diathermy.engine.effects.electric import conductivity
+from diathermy.engine.removal import tissue_share
 from diathermy.engine.simulation import Simulation
-from diathermy.physics.topology import tissue_share
 from tests.engine.test_graded_engine import graded_scene
 
 FRACTION = {"removal": "fraction"}
@@ -21,9 +21,8 @@ def test_a_fraction_run_cuts_balances_energy_and_blends_partly_cut_tets():
     assert cut[-1] > 0 and all(b >= a for a, b in zip(cut, cut[1:], strict=False))
     e = reports[-1].energy
     assert abs(e["imbalance"]) <= 1e-3 * e["joule_in"]
-    topo = sim.topology
-    assert topo is not None
-    share = tissue_share(topo)
+    share = tissue_share(sim.ctx, sim.state)
+    assert share is not None
     partial = (share > 0) & (share < 1)
     assert partial.any()
     sigma = conductivity(sim.ctx, sim.state)
@@ -33,6 +32,19 @@ def test_a_fraction_run_cuts_balances_energy_and_blends_partly_cut_tets():
     assert np.all(sigma[partial] > t.sigma_removed_s_per_m)
     assert np.all(sigma[partial] < sigma[whole].max())
     assert np.all(sigma[share == 0] == t.sigma_removed_s_per_m)
+
+
+def test_without_the_topology_the_shares_come_from_the_level_set_exactly():
+    """A state restored without the dissection's topology (memory) gets the same shares from
+    its level set and removed mask: the removed tets not half cut are the loose ones."""
+    sim = Simulation(graded_scene(level_set=FRACTION))
+    sim.run(20)
+    kept = tissue_share(sim.ctx, sim.state)
+    assert kept is not None and (kept < 1).any()
+    sim.state.memory.topology = None
+    again = tissue_share(sim.ctx, sim.state)
+    assert again is not None and np.array_equal(again, kept)
+    assert tissue_share(Simulation(graded_scene()).ctx, sim.state) is None  # threshold
 
 
 def test_a_fraction_run_differs_from_a_threshold_run_only_once_tets_are_partly_cut():

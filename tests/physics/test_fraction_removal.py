@@ -48,7 +48,7 @@ def switch_height(mesh) -> float:
 
 def fields(mesh, topo: Topology, removal: str) -> tuple[np.ndarray, np.ndarray]:
     """(u (n_nodes, 3) m under a uniform pore overpressure, the cut's nodal driver W J/m^3)."""
-    healthy = ~topo.removed if removal == "threshold" else tissue_share(topo)
+    healthy = ~topo.removed if removal == "threshold" else tissue_share(topo.fraction, topo.loose)
     Es = ersatz_youngs_modulus(healthy, E, RATIO)
     solver = MechanicsSolver(mesh, Es, NU, healthy=healthy, rtol=1e-12, maxiter=2000)
     u = solver.solve(np.full(mesh.n_nodes, 101325.0 + DP)).u
@@ -72,7 +72,7 @@ def test_the_share_is_the_tissue_left_and_zero_in_loose_fragments():
     fraction = np.array([0.0, 0.25, 0.5, 1.0])
     loose = np.array([False, False, False, True])
     topo = Topology(fraction, fraction >= 0.5, loose, 0.0, 0.0)
-    assert np.array_equal(tissue_share(topo), [1.0, 0.75, 0.5, 0.0])
+    assert np.array_equal(tissue_share(topo.fraction, topo.loose), [1.0, 0.75, 0.5, 0.0])
     assert topo.fraction[3] == 1.0  # the topology's own arrays are not written
     # the blend's ends are the two materials exactly; the middle is linear
     assert np.array_equal(share_blend(np.array([1.0, 0.0, 0.5]), 4.0, 2.0), [4.0, 2.0, 3.0])

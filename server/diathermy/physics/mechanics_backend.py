@@ -69,8 +69,8 @@ class MechanicsBackend(Protocol):
 class HierarchyOrigin:
     """The topology the mechanics AMG hierarchy was built for: E per tet (Pa) and the healthy
     mask of that solve (loose fragments removed; the tissue shares under 'fraction' removal),
-    with the reuse counters since; a checkpoint
-    saves it so that a restored run rebuilds the very same preconditioner."""
+    with the reuse counters since; a checkpoint saves it so that a restored run rebuilds the
+    very same preconditioner."""
 
     youngs_modulus_pa: np.ndarray
     healthy: np.ndarray
@@ -223,11 +223,11 @@ def solve_with_cut(
     removed: np.ndarray,
     warm_start: np.ndarray | None,
     tissue: Tissue,
-    tissue_share: np.ndarray | None = None,
     grads: np.ndarray,
     tets: np.ndarray,
     previous_W: np.ndarray | None = None,
     grid: Grid | None = None,
+    tissue_share: np.ndarray | None = None,
 ) -> tuple[MechanicsOutput, np.ndarray]:
     """Displacement under the pore pressure (Pa) with the cut as ersatz material, and the strain
     energy density per tet (J/m^3) of the stiffness it was solved with (a loose fragment is

@@ -256,12 +256,13 @@ class Topology:
     crater_depth_m: float
 
 
-def tissue_share(topology: Topology) -> np.ndarray:
-    """Share (n_tets,) in [0, 1] of each tet that is still tissue: 1 - its removed fraction,
-    0 in a loose fragment. Continuous in phi (the fraction is), where the removed mask jumps at
-    ``REMOVED_FRACTION``; the properties of ``level_set.removal`` 'fraction' blend by it."""
-    share = 1.0 - topology.fraction
-    share[topology.loose] = 0.0
+def tissue_share(fraction: np.ndarray, loose: np.ndarray) -> np.ndarray:
+    """Share (n_tets,) in [0, 1] of each tet that is still tissue: 1 - its removed ``fraction``,
+    0 in a ``loose`` fragment (both (n_tets,), as ``Topology`` holds them). Continuous in phi
+    (the fraction is), where the removed mask jumps at ``REMOVED_FRACTION``; the properties of
+    ``level_set.removal`` 'fraction' blend by it."""
+    share = 1.0 - np.asarray(fraction, dtype=float)
+    share[np.asarray(loose, dtype=bool)] = 0.0
     return share
 
 
