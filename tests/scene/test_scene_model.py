@@ -80,6 +80,7 @@ def test_closure_is_idempotent_and_ordered(effects):
         ({"electrodes": [{"name": "a"}, {"name": "a"}]}, "unique"),
         ({"schema_version": 2}, "schema_version"),
         ({"unknown_field": 1}, "unknown_field"),
+        ({"level_set": {"removal": "half"}}, "level_set.removal"),
     ],
 )
 def test_bad_scene_names_the_field(data, field):
