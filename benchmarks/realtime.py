@@ -106,10 +106,11 @@ def warm_up(scene: Scene, path: Path, warmup: int, exact: bool = False) -> tuple
     return path, after_cut
 
 
-def checkpoint(name: str, grid: str, warmup: int) -> Path:
-    """The cached checkpoint of built-in scene ``name`` on ``grid`` two steps after its first
-    cut (``warm_up``), made first when there is none."""
-    return warm_up(scene_on(name, grid), CACHE / f"{name}_{grid}.h5", warmup)[0]
+def checkpoint(name: str, grid: str, warmup: int, removal: str = "threshold") -> Path:
+    """The cached checkpoint of built-in scene ``name`` on ``grid`` (with the cut's
+    ``removal``) two steps after its first cut (``warm_up``), made first when there is none."""
+    tail = "" if removal == "threshold" else f"_{removal}"
+    return warm_up(scene_on(name, grid, removal), CACHE / f"{name}_{grid}{tail}.h5", warmup)[0]
 
 
 def scene_on(name: str, grid: str, removal: str = "threshold") -> Scene:
@@ -310,11 +311,13 @@ def profile(a: argparse.Namespace, started: str) -> None:
     import cProfile
     import pstats
 
+    removal = getattr(a, "removal", "threshold")
+    flag = "" if removal == "threshold" else f" --removal {removal}"
     lines = [
         "# Real time: where a cutting step's time goes (incremental mode, cProfile)",
         "",
         f"`python benchmarks/realtime.py profile --scenes {' '.join(a.scenes)} --grids "
-        f"{' '.join(a.grids)} --steps {a.steps}` (started {started}, load average "
+        f"{' '.join(a.grids)} --steps {a.steps}{flag}` (started {started}, load average "
         f"{os.getloadavg()[0]:.1f}): {a.steps} steps from the checkpoint two steps after the "
         "first cut; the profiler inflates every call alike. Own time: in the function itself; "
         "cumulative: with what it calls.",
@@ -322,8 +325,8 @@ def profile(a: argparse.Namespace, started: str) -> None:
     ]
     for name in a.scenes:
         for grid in a.grids:
-            scene = scene_on(name, grid)
-            sim = load_as(checkpoint(name, grid, a.warmup))
+            scene = scene_on(name, grid, removal)
+            sim = load_as(checkpoint(name, grid, a.warmup, removal))
             prof = cProfile.Profile()
             prof.enable()
             for _ in range(a.steps):
@@ -449,7 +452,7 @@ def parser() -> argparse.ArgumentParser:
             "--removal",
             choices=("threshold", "fraction"),
             default="threshold",
-            help="run: the scenes' level_set.removal, for every mode",
+            help="the scenes' level_set.removal (run: for every mode)",
         )
         start = r.add_mutually_exclusive_group()
         start.add_argument(
@@ -514,7 +517,7 @@ def main() -> None:
     if a.cmd == "timers":
         from realtime_timers import timers  # the realtime.py timers subcommand
 
-        timers(a, started, lambda n, g: load_as(checkpoint(n, g, a.warmup)))
+        timers(a, started, lambda n, g: load_as(checkpoint(n, g, a.warmup, a.removal)))
         return
     if a.cmd == "report":
         if not (a.folder / "realtime.json").is_file():

@@ -153,11 +153,13 @@ def table(rows: list[dict[str, float]]) -> list[str]:
 def timers(a: argparse.Namespace, started: str, load: Callable[[str, str], Any]) -> Path:
     """The incremental mode's steps per (scene, grid) of ``a`` from ``load(scene, grid)`` (its
     checkpoint continued), timed; the tables into ``a.out / realtime_timers.md``."""
+    removal = getattr(a, "removal", "threshold")
+    flag = "" if removal == "threshold" else f" --removal {removal}"
     lines = [
         "# Real time: where a cutting step's time goes (incremental mode, wall-clock timers)",
         "",
         f"`python benchmarks/realtime.py timers --scenes {' '.join(a.scenes)} --grids "
-        f"{' '.join(a.grids)} --steps {a.steps}` (started {started}, load average "
+        f"{' '.join(a.grids)} --steps {a.steps}{flag}` (started {started}, load average "
         f"{os.getloadavg()[0]:.1f}; one BLAS thread): {a.steps} steps from the checkpoint two "
         "steps after the first cut. Each effect from the step report; inside the mechanics each "
         "part's own time (``realtime_timers.PROBES``: a part's timed callees are their own rows), "

@@ -237,7 +237,11 @@ def test_the_profile_writes_where_it_is_told(
     """``profile --out`` writes its table there, not over the committed results."""
     committed = bench.RESULTS / "realtime_profile.md"
     before = committed.read_bytes() if committed.exists() else None
-    monkeypatch.setattr(bench, "scene_on", lambda name, grid: tiny_scene())
+    monkeypatch.setattr(
+        bench,
+        "scene_on",
+        lambda name, grid, removal="threshold": tiny_scene(level_set={"removal": removal}),
+    )
     monkeypatch.setattr(bench, "CACHE", tmp_path / "cache")
     out = tmp_path / "out"
     args = argparse.Namespace(scenes=["default"], grids=["own"], steps=2, warmup=40, top=5, out=out)
@@ -245,3 +249,9 @@ def test_the_profile_writes_where_it_is_told(
     text = (out / "realtime_profile.md").read_text()
     assert "| function | calls |" in text and "2 steps" in text
     assert (committed.read_bytes() if committed.exists() else None) == before
+    # under --removal fraction: its own checkpoint, and the table says so
+    args.removal = "fraction"
+    bench.profile(args, "now")
+    assert "--steps 2 --removal fraction`" in (out / "realtime_profile.md").read_text()
+    cached = {p.name for p in (tmp_path / "cache").glob("*.h5")}
+    assert cached == {"default_own.h5", "default_own_fraction.h5"}
