@@ -1,8 +1,8 @@
 """The hard-case suite (DESIGN.md ask 2): scenes that must stay finite, bounded and solver-clean.
 
 Every case checks ``assert_sane`` after every step (see there for the bounds) plus what is
-particular to it. Grids are small (9x9x17 or 5x5x9) so that the file runs in CI in well under
-3 minutes.
+particular to it, under both cut rules (``level_set.removal`` threshold and fraction). Grids are
+small (9x9x17 or 5x5x9) so that the file runs in CI in well under 3 minutes.
 """
 
 from __future__ import annotations
@@ -16,9 +16,32 @@ from diathermy.engine.simulation import Simulation
 from diathermy.physics.eos import saturation_pressure
 from diathermy.physics.materials import Tissue
 from diathermy.physics.topology import evaluate_topology
-from diathermy.scene import Electrode, ElectrodePath, Scene
+from diathermy.scene import Electrode, ElectrodePath
+from diathermy.scene import Scene as SceneModel
 
-from .scenes import tiny_scene
+from . import scenes
+
+REMOVALS = ("threshold", "fraction")
+_RULE = {"removal": "threshold"}  # the running case's cut rule
+
+
+@pytest.fixture(params=REMOVALS, autouse=True)
+def removal(request: pytest.FixtureRequest):  # noqa: ANN201
+    """Every case under each cut rule: the scenes this module builds get it."""
+    _RULE["removal"] = str(request.param)
+    yield request.param
+    _RULE["removal"] = "threshold"
+
+
+def tiny_scene(**overrides):  # noqa: ANN003, ANN201
+    """The tiny scene under the running case's cut rule."""
+    return scenes.tiny_scene(level_set=dict(_RULE), **overrides)
+
+
+def Scene(**fields):  # noqa: ANN003, ANN201, N802
+    """``diathermy.scene.Scene`` under the running case's cut rule."""
+    return SceneModel(level_set=dict(_RULE), **fields)
+
 
 T_CEILING_K = 1000.0
 """A physical ceiling for tissue temperature: far above charring (~600 K), far below anything a
@@ -37,7 +60,7 @@ def assert_sane(sim: Simulation, rep: StepReport) -> None:
     - every field finite (no NaN/Inf);
     - min(T0, T_amb) <= T <= T_CEILING_K (1000 K): no undershoot, no runaway heating;
     - p0 <= p <= p_sat(max T) <= p_sat(T_CEILING_K): the EOS never supersaturates;
-    - 0 <= x <= 1 and |u| below the smallest block dimension;
+    - 0 <= x <= 1 and the tissue's |u| (the report's) below the smallest block dimension;
     - the energy balance closes: |Joule in - sensible - latent - convective| <= 1e-6 Joule in,
       plus what the heat solves' tolerance allows: each leaves a residual <= rtol |M T / dt|, so
       the stored energy may be off by ~rtol sum(m T) per step (dominant only at dt ~ 1e-4 s);

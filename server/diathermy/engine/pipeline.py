@@ -26,6 +26,7 @@ from diathermy.engine.left_out import left_out_acting
 from diathermy.engine.report import StepReport
 from diathermy.engine.state import SimulationState
 from diathermy.engine.step import Outcome, Step
+from diathermy.physics.topology import tissue_nodes
 
 
 @dataclass(frozen=True)
@@ -109,7 +110,10 @@ def finish_report(rep: StepReport, state: SimulationState, ctx: EngineContext) -
     """The key figures of the state after the step, and the energy ledger."""
     rep.max_temperature_k = float(state["temperature"].max())
     rep.max_pressure_pa = float(state["pressure"].max())
-    rep.max_displacement_m = float(np.linalg.norm(state["displacement"], axis=1).max())
+    u = np.linalg.norm(state["displacement"], axis=1)
+    if state["removed"].any():  # the tissue's, not the crater's near-void nodes
+        u = u[tissue_nodes(state["removed"], ctx.disc.mesh.tets, ctx.disc.n_nodes)]
+    rep.max_displacement_m = float(u.max(initial=0.0))
     rep.max_strain_energy_j_per_m3 = float(state["strain_energy"].max())
     topology = state.memory.topology
     if topology is not None:

@@ -21,6 +21,8 @@ class EffectReport:
 class StepReport:
     """The report of one step; ``to_dict`` gives the JSON record stored in run files.
 
+    ``max_displacement_m``: the largest |u| (m) on the tissue's nodes (``topology.tissue_nodes``;
+    the crater's near-void nodes left out once something is cut).
     ``beyond_fine_region_m``: how far the cut, the vapor and the lesion reach beyond a graded
     grid's working region, in m (0: inside; empty on a uniform grid; ``engine.fine_region``).
     ``left_out_effects``: the effects the scene leaves out that this step's state says would act,

@@ -256,6 +256,15 @@ class Topology:
     crater_depth_m: float
 
 
+def tissue_nodes(removed: np.ndarray, tets: np.ndarray, n_nodes: int) -> np.ndarray:
+    """Mask (n_nodes,) of the nodes of at least one tet not ``removed`` (n_tets,): the tissue's
+    nodes. The others lie in the crater, where only the ersatz material holds them and their
+    displacement is whatever that near-void's solve leaves."""
+    mask = np.zeros(n_nodes, dtype=bool)
+    mask[tets[~np.asarray(removed, dtype=bool)].ravel()] = True
+    return mask
+
+
 def tissue_share(fraction: np.ndarray, loose: np.ndarray) -> np.ndarray:
     """Share (n_tets,) in [0, 1] of each tet that is still tissue: 1 - its removed ``fraction``,
     0 in a ``loose`` fragment (both (n_tets,), as ``Topology`` holds them). Continuous in phi
