@@ -1,6 +1,7 @@
 """The engine under ``level_set.removal`` 'fraction' (each tet's properties blended by its tissue
-share): it cuts, closes its energy balance, blends the conductivity of partly cut tets and
-restores bit for bit; the removed mask, the cut volume and the stream stay what they were."""
+share): it cuts, closes its energy balance, blends the conductivity of partly cut tets, is the
+threshold model to the bit until the first cut, finds the shares without its topology in memory
+and restores bit for bit."""
 
 from __future__ import annotations
 
