@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from diathermy.fem.geometry import element_geometry
 from diathermy.mesh import Grid, build_tet_mesh
-from diathermy.physics.levelset import advance, initial_level_set
+from diathermy.physics.levelset import advance, initial_level_set, volume_incidence
 from diathermy.physics.topology import (
     _kuhn_negative_count,
     bottom_tets,
@@ -22,6 +22,7 @@ from diathermy.physics.topology import (
     loose_fragments,
     removed_fraction,
     removed_tets,
+    tissue_nodes,
 )
 
 
@@ -252,3 +253,21 @@ def test_contact_height_on_an_advanced_level_set():
     top = g.origin_m[2] + g.size_m[2]
     assert contact_height(phi, g, 0.004, 0.004) == pytest.approx(top - 2e-3, abs=1e-9)
     assert contact_height(phi, g, 0.0005, 0.004) == top
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(0.0, 1.0))
+def test_tissue_nodes_are_the_nodes_of_tets_not_removed(seed, share_removed):
+    """Any removed mask: the nodes of the tets left, by the gather and by the incidence product
+    alike; every node of a removed-only neighbourhood is out."""
+    mesh = build_tet_mesh(Grid((4, 5, 6), size_m=(0.01, 0.01, 0.01)))
+    volumes = element_geometry(mesh.points, mesh.tets).volumes
+    removed = np.random.default_rng(seed).random(mesh.n_tets) < share_removed
+    gathered = tissue_nodes(removed, mesh.tets, mesh.n_nodes)
+    product = tissue_nodes(
+        removed, mesh.tets, mesh.n_nodes, volume_incidence(mesh.tets, volumes, mesh.n_nodes)
+    )
+    assert np.array_equal(gathered, product)
+    for node in range(mesh.n_nodes):
+        around = np.flatnonzero((mesh.tets == node).any(axis=1))
+        assert gathered[node] == bool((~removed[around]).any())

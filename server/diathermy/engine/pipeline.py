@@ -112,7 +112,7 @@ def finish_report(rep: StepReport, state: SimulationState, ctx: EngineContext) -
     rep.max_pressure_pa = float(state["pressure"].max())
     u = np.linalg.norm(state["displacement"], axis=1)
     if state["removed"].any():  # the tissue's, not the crater's near-void nodes
-        u = u[tissue_nodes(state["removed"], ctx.disc.mesh.tets, ctx.disc.n_nodes)]
+        u = u[tissue_nodes(state["removed"], ctx.disc.mesh.tets, ctx.disc.n_nodes, ctx.incidence)]
     rep.max_displacement_m = float(u.max(initial=0.0))
     rep.max_strain_energy_j_per_m3 = float(state["strain_energy"].max())
     topology = state.memory.topology

