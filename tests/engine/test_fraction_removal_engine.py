@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from diathermy.engine.backends import fem_of
 from diathermy.engine.effects.electric import conductivity
+from diathermy.engine.effects.thermal import heat_conductivity
 from diathermy.engine.removal import tissue_share
 from diathermy.engine.simulation import Simulation
 from tests.engine.test_graded_engine import graded_scene
@@ -33,6 +35,16 @@ def test_a_fraction_run_cuts_balances_energy_and_blends_partly_cut_tets():
     assert np.all(sigma[partial] > t.sigma_removed_s_per_m)
     assert np.all(sigma[partial] < sigma[whole].max())
     assert np.all(sigma[share == 0] == t.sigma_removed_s_per_m)
+    # heat conduction likewise, between vapor's and the mixture's
+    k = heat_conductivity(sim.ctx, sim.state)
+    lo, hi = sorted((t.k_vapor_w_per_m_k, float(k[whole].max())))
+    assert np.all((k[partial] > lo) & (k[partial] < hi))
+    assert np.all(k[share == 0] == t.k_vapor_w_per_m_k)
+    # and the stiffness the mechanics solved with (the shares of the step before the last
+    # advance): blended between ersatz and the tissue's, where the threshold has only the two
+    E = fem_of(sim.mechanics).solver.youngs_modulus_pa
+    E_t, ersatz = t.youngs_modulus_pa, t.ersatz_stiffness_ratio * t.youngs_modulus_pa
+    assert np.count_nonzero((E > 1.001 * ersatz) & (E < 0.999 * E_t)) > 10
 
 
 def test_without_the_topology_the_shares_come_from_the_level_set_exactly():

@@ -26,20 +26,27 @@ def skip(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome | No
     return None
 
 
-def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
-    """The heat step from the step's starting temperature (staggered, or monolithic with V)."""
+def heat_conductivity(ctx: EngineContext, state: SimulationState) -> np.ndarray:
+    """k per tet in W/(m K): the vapor-liquid mixture's, vapor's in removed tets (blended by
+    each tet's tissue share under ``level_set.removal`` 'fraction')."""
     t = ctx.tissue
     x = state["vapor_fraction"]
-    rho_c = volumetric_heat_capacity(x, state["pressure"], step.T_old, t)
     if x.any():
         k = tet_mean(effective_conductivity(x, t), ctx.disc.grid)
     else:  # no vapor yet: the liquid-phase mixture everywhere
         k = np.full(ctx.disc.n_tets, float(effective_conductivity(0.0, t)))
     share = tissue_share(ctx, state)
     if share is not None:
-        k = share_blend(share, k, t.k_vapor_w_per_m_k)
-    else:
-        k[state["removed"]] = t.k_vapor_w_per_m_k
+        return share_blend(share, k, t.k_vapor_w_per_m_k)
+    k[state["removed"]] = t.k_vapor_w_per_m_k
+    return k
+
+
+def run(ctx: EngineContext, state: SimulationState, step: Step) -> Outcome:
+    """The heat step from the step's starting temperature (staggered, or monolithic with V)."""
+    x = state["vapor_fraction"]
+    rho_c = volumetric_heat_capacity(x, state["pressure"], step.T_old, ctx.tissue)
+    k = heat_conductivity(ctx, state)
     if step.monolithic is not None:
         req = step.monolithic
         mono = ctx.coupled.monolithic_step(
